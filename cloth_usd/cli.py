@@ -1,0 +1,96 @@
+"""The ``cloth-usd`` command: ``inspect``, ``bake`` and ``doctor``."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from typing import Sequence
+
+from . import __version__
+from .errors import ClothUsdError
+
+__all__ = ["main"]
+
+log = logging.getLogger("cloth_usd")
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="cloth-usd", description="Learned garment animation for USD shots.")
+    p.add_argument("--version", action="version", version=f"cloth-usd {__version__}")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging and tracebacks on error")
+    sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+
+    i = sub.add_parser("inspect", help="list characters, garments, frame range, units and problems")
+    i.add_argument("scene", help="USD stage to read")
+
+    b = sub.add_parser("bake", help="write a garment point-cache layer")
+    b.add_argument("scene", help="USD stage to read (never modified)")
+    b.add_argument("-o", "--output", required=True, help="cache layer to write (.usdc, .usda)")
+    b.add_argument("--shot", help="also write a shot layer that sublayers [cache, scene]")
+    b.add_argument("--frames", help="START:END[:STEP], inclusive (default: the stage's range)")
+    b.add_argument("--garment", action="append", metavar="PRIM", help="bake only this garment (repeatable)")
+    b.add_argument("--tier", help="default tier for garments without cloth:tier: skinning, coarse, detail")
+    b.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
+    b.add_argument("--force", action="store_true", help="replace existing output files")
+    b.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+
+    d = sub.add_parser("doctor", help="check the body model file(s) and the runtime")
+    d.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
+    d.add_argument("--gender", default="neutral", help="file to pick inside a folder: neutral, female, male")
+    return p
+
+
+def _inspect(args: argparse.Namespace) -> int:
+    from .inspect import format_report, inspect_stage
+
+    report = inspect_stage(args.scene)
+    sys.stdout.write(format_report(report) + "\n")
+    return 1 if report.problems else 0
+
+
+def _bake(args: argparse.Namespace) -> int:
+    from .bake import bake
+
+    result = bake(args.scene, args.output, shot=args.shot, frames=args.frames, garments=args.garment,
+                  tier=args.tier, force=args.force, body_model=args.body_model,
+                  progress=not args.no_progress and sys.stderr.isatty())
+    for g in result.garments:
+        sys.stdout.write(f"{g.prim_path}: {g.frames} frames, {g.vertices} vertices, tier {g.tier.value}\n")
+    per_frame = result.seconds / max(1, result.times.shape[0]) * 1000.0
+    sys.stdout.write(f"wrote {result.cache} ({result.times.shape[0]} frames, {result.seconds:.2f} s, "
+                     f"{per_frame:.1f} ms/frame)\n")
+    if result.shot:
+        sys.stdout.write(f"wrote {result.shot} (open this to see the animated garments)\n")
+    return 0
+
+
+def _doctor(args: argparse.Namespace) -> int:
+    from .doctor import run_checks
+
+    def show(check) -> None:
+        sys.stdout.write(f"{'ok  ' if check.ok else 'FAIL'}  {check.name}: {check.detail}\n")
+
+    checks = run_checks(args.body_model, gender=args.gender, progress=show)
+    return 0 if all(c.ok for c in checks) else 1
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the CLI; returns the process exit code."""
+    args = _parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                        format="cloth-usd: %(levelname)s: %(message)s")
+    try:
+        return {"inspect": _inspect, "bake": _bake, "doctor": _doctor}[args.command](args)
+    except ClothUsdError as exc:
+        if args.verbose:
+            log.exception("failed")
+        sys.stderr.write(f"cloth-usd: error: {exc}\n")
+        return 2
+    except KeyboardInterrupt:
+        sys.stderr.write("cloth-usd: interrupted; no output was written\n")
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

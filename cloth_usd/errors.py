@@ -1,0 +1,40 @@
+"""The one error hierarchy of cloth_usd.
+
+Every error a user can cause is a :class:`ClothUsdError`; its message names the file,
+prim, frame or argument at fault and says what to do. The CLI prints it as one line.
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "ClothUsdError",
+    "BodyModelError",
+    "SceneError",
+    "GarmentError",
+    "OutputExistsError",
+    "ArgumentError",
+]
+
+
+class ClothUsdError(Exception):
+    """Base of every error cloth_usd raises on purpose."""
+
+
+class BodyModelError(ClothUsdError):
+    """A body model file is missing, unreadable or not in SMPL layout."""
+
+
+class SceneError(ClothUsdError):
+    """A stage breaks the scene contract (../shared/SCENE.md)."""
+
+
+class GarmentError(SceneError):
+    """A garment prim breaks the scene contract."""
+
+
+class OutputExistsError(ClothUsdError):
+    """An output file exists and ``--force`` was not given."""
+
+
+class ArgumentError(ClothUsdError):
+    """A command-line or API argument is out of range or malformed."""

@@ -1,0 +1,55 @@
+"""What ``cloth-usd inspect`` reports about a stage: characters, garments, range, units, problems."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from .core.scene import Scene
+
+__all__ = ["InspectReport", "inspect_stage", "format_report"]
+
+
+@dataclass(frozen=True)
+class InspectReport:
+    """A stage as cloth_usd sees it."""
+
+    scene: Scene
+    problems: tuple[str, ...] = field(default=())
+    """One line each: contract violations found (the bake would refuse these prims)."""
+
+
+def inspect_stage(path: str | Path) -> InspectReport:
+    """Read a stage leniently: every contract violation becomes a problem line."""
+    from .usd.read import open_stage, read_scene
+
+    problems: list[str] = []
+    scene = read_scene(open_stage(path), problems=problems)
+    return InspectReport(scene=scene, problems=tuple(problems))
+
+
+def format_report(report: InspectReport) -> str:
+    """Human-readable text of an :class:`InspectReport`."""
+    s = report.scene.stage
+    rng = ("unauthored" if s.start_time_code is None or s.end_time_code is None
+           else f"{s.start_time_code:g}..{s.end_time_code:g}")
+    mpu = f"{s.meters_per_unit:g}" + ("" if s.meters_per_unit_authored else " (unauthored: USD default)")
+    lines = [
+        f"stage       {s.identifier}",
+        f"units       upAxis {s.up_axis}, metersPerUnit {mpu}",
+        f"time        {rng} at {s.time_codes_per_second:g} time codes/s, {s.frames_per_second:g} fps",
+        f"characters  {len(report.scene.characters)}",
+    ]
+    for c in report.scene.characters:
+        betas = ", ".join(f"{b:.2f}" for b in c.betas[:4]) + ", ..."
+        lines.append(f"  {c.prim_path}  gender {c.gender}  betas [{betas}]"
+                     + ("" if c.betas_authored else "  (smpl:betas missing: zeros)"))
+    lines.append(f"garments    {len(report.scene.garments)}")
+    for g in report.scene.garments:
+        state = "enabled" if g.enabled else "disabled"
+        tier = g.tier.value if g.tier else "default"
+        lines.append(f"  {g.prim_path}  {g.category.value}  body {g.body_path}  tier {tier}  {state}  "
+                     f"{g.rest_points.shape[0]} vertices, {g.triangles.shape[0]} triangles")
+    lines.append(f"problems    {len(report.problems)}")
+    lines.extend(f"  {p}" for p in report.problems)
+    return "\n".join(lines)

@@ -1,0 +1,173 @@
+"""Writing the point-cache layer and the shot layer (SCENE.md, "The output").
+
+The cache layer holds only ``over`` specs at garment prim paths with time-sampled
+``points`` and ``extent``. Layers are written to a temporary file beside the target and
+renamed into place, so a crash never leaves a partial file; an existing file is only
+replaced with ``force``; a layer the source stage uses is never a target.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+from pxr import Sdf, Vt
+
+from ..core.scene import StageInfo
+from ..errors import ArgumentError, OutputExistsError
+
+__all__ = ["CacheLayerWriter", "write_shot_layer", "check_output_path"]
+
+log = logging.getLogger(__name__)
+
+_FORMATS = {".usdc", ".usda", ".usd"}
+
+
+def check_output_path(path: str | Path, *, force: bool, protected: Iterable[str] = ()) -> Path:
+    """Validate an output path before any work is done.
+
+    Args:
+        protected: real paths of the source stage's layers; never writable.
+    Raises:
+        ArgumentError: unknown extension, missing folder, or a source layer as target.
+        OutputExistsError: the file exists and ``force`` is false.
+    """
+    path = Path(path)
+    if path.suffix not in _FORMATS:
+        raise ArgumentError(f"{path}: output must end in .usdc, .usda or .usd")
+    if not path.parent.exists():
+        raise ArgumentError(f"{path}: folder '{path.parent}' does not exist")
+    real = os.path.realpath(path)
+    if any(real == os.path.realpath(p) for p in protected if p):
+        raise ArgumentError(f"{path}: is a layer of the source stage; cloth_usd never writes into "
+                            "source layers, choose another output path")
+    if path.exists() and not force:
+        raise OutputExistsError(f"{path}: already exists; pass --force to replace it")
+    return path
+
+
+def _temp_path(path: Path) -> Path:
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=f".tmp{path.suffix}", dir=path.parent)
+    os.close(fd)
+    os.unlink(tmp)  # Sdf creates the file itself
+    return Path(tmp)
+
+
+def _commit(layer: Sdf.Layer, tmp: Path, path: Path, force: bool) -> None:
+    if not layer.Save():
+        raise OSError(f"{tmp}: USD could not save the layer")
+    if path.exists() and not force:
+        tmp.unlink(missing_ok=True)
+        raise OutputExistsError(f"{path}: appeared while baking; pass --force to replace it")
+    os.replace(tmp, path)
+
+
+def _copy_stage_metadata(layer: Sdf.Layer, stage: StageInfo, start: float, end: float) -> None:
+    layer.timeCodesPerSecond = stage.time_codes_per_second
+    layer.framesPerSecond = stage.frames_per_second
+    layer.startTimeCode = float(start)
+    layer.endTimeCode = float(end)
+    layer.pseudoRoot.SetInfo("upAxis", stage.up_axis)
+    layer.pseudoRoot.SetInfo("metersPerUnit", float(stage.meters_per_unit))
+
+
+class CacheLayerWriter:
+    """Writes a point-cache layer frame chunk by frame chunk, then commits it atomically.
+
+    Use as a context manager: leaving the block by an exception removes the temporary
+    file and leaves any existing output untouched::
+
+        with CacheLayerWriter(path, stage=info, start=1, end=48, force=False) as w:
+            w.add_points("/Char/Shirt", times, points)
+            w.commit(provenance)
+    """
+
+    def __init__(self, path: str | Path, *, stage: StageInfo, start: float, end: float,
+                 force: bool = False, protected: Iterable[str] = ()) -> None:
+        self.path = check_output_path(path, force=force, protected=protected)
+        self.force = force
+        self._tmp = _temp_path(self.path)
+        self._layer = Sdf.Layer.CreateNew(str(self._tmp))
+        if self._layer is None:
+            raise OSError(f"{self._tmp}: USD could not create a layer here")
+        _copy_stage_metadata(self._layer, stage, start, end)
+        self._attrs: dict[str, tuple[Sdf.Path, Sdf.Path]] = {}
+        self._committed = False
+
+    def __enter__(self) -> "CacheLayerWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if not self._committed:
+            self.abort()
+
+    def _specs(self, prim_path: str) -> tuple[Sdf.Path, Sdf.Path]:
+        if prim_path not in self._attrs:
+            spec = Sdf.CreatePrimInLayer(self._layer, Sdf.Path(prim_path))  # 'over' specs
+            points = Sdf.AttributeSpec(spec, "points", Sdf.ValueTypeNames.Point3fArray)
+            extent = Sdf.AttributeSpec(spec, "extent", Sdf.ValueTypeNames.Float3Array)
+            self._attrs[prim_path] = (points.path, extent.path)
+        return self._attrs[prim_path]
+
+    def add_points(self, prim_path: str, times: np.ndarray, points: np.ndarray) -> None:
+        """Author time samples of ``points`` and ``extent`` for one garment.
+
+        Args:
+            times: (T,) float64 time codes.
+            points: (T, N, 3) float points in the garment prim's own space and units.
+        """
+        points = np.ascontiguousarray(points, dtype=np.float32)
+        if not np.all(np.isfinite(points)):
+            bad = int(np.nonzero(~np.isfinite(points).all(axis=(1, 2)))[0][0])
+            raise ValueError(f"{prim_path}: non-finite points at time code {times[bad]}")
+        pts_path, ext_path = self._specs(prim_path)
+        lo, hi = points.min(axis=1), points.max(axis=1)
+        for i, t in enumerate(np.asarray(times, dtype=np.float64)):
+            self._layer.SetTimeSample(pts_path, float(t), Vt.Vec3fArray.FromNumpy(points[i]))
+            self._layer.SetTimeSample(ext_path, float(t), Vt.Vec3fArray.FromNumpy(
+                np.stack([lo[i], hi[i]])))
+
+    def commit(self, provenance: Mapping[str, Any]) -> Path:
+        """Record provenance in ``customLayerData``, save, and rename into place."""
+        self._layer.customLayerData = dict(provenance)
+        _commit(self._layer, self._tmp, self.path, self.force)
+        self._committed = True
+        log.info("wrote %s", self.path)
+        return self.path
+
+    def abort(self) -> None:
+        """Drop the temporary file; the target is left as it was."""
+        self._tmp.unlink(missing_ok=True)
+        self._committed = True
+
+
+def _relative(target: Path, start: Path) -> str:
+    try:
+        return os.path.relpath(target.resolve(), start.resolve().parent)
+    except ValueError:  # another drive
+        return str(target.resolve())
+
+
+def write_shot_layer(path: str | Path, *, cache: str | Path, scene: str | Path, stage: StageInfo,
+                     start: float, end: float, force: bool = False,
+                     protected: Iterable[str] = ()) -> Path:
+    """Write a layer that sublayers ``[cache, scene]``, strongest first.
+
+    The cache must sit above the scene: a default value in a stronger layer would hide
+    its time samples. Paths are stored relative to the shot layer when possible.
+    """
+    path = check_output_path(path, force=force, protected=protected)
+    tmp = _temp_path(path)
+    layer = Sdf.Layer.CreateNew(str(tmp))
+    try:
+        _copy_stage_metadata(layer, stage, start, end)
+        layer.subLayerPaths = [_relative(Path(cache), path), _relative(Path(scene), path)]
+        _commit(layer, tmp, path, force)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    return path

@@ -1,0 +1,188 @@
+"""End to end: the cloth-usd command on the bundled samples, and every contract error."""
+
+from __future__ import annotations
+
+import hashlib
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+from pxr import Sdf, Usd, UsdGeom, UsdSkel, Vt
+
+from cloth_usd.cli import main
+
+SAMPLES = Path(__file__).resolve().parents[1] / "samples"
+WALK = SAMPLES / "walk_tshirt" / "scene.usda"
+ZUP = SAMPLES / "walk_tshirt_zup_cm" / "scene.usda"
+
+
+def _digest(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _points(layer_path: Path, prim: str, t: float) -> np.ndarray:
+    stage = Usd.Stage.Open(str(layer_path))
+    return np.array(UsdGeom.Mesh(stage.GetPrimAtPath(prim)).GetPointsAttr().Get(t))
+
+
+def _rest(scene: Path, prim: str) -> np.ndarray:
+    stage = Usd.Stage.Open(str(scene))
+    return np.array(UsdGeom.Mesh(stage.GetPrimAtPath(prim)).GetPointsAttr().Get())
+
+
+def test_bake_writes_cache_and_shot_and_never_touches_the_source(tmp_path, capsys):
+    before = _digest(WALK)
+    cache, shot = tmp_path / "cache.usdc", tmp_path / "shot.usda"
+    assert main(["bake", str(WALK), "-o", str(cache), "--shot", str(shot)]) == 0
+    assert _digest(WALK) == before
+    assert "wrote" in capsys.readouterr().out
+    layer = Sdf.Layer.FindOrOpen(str(cache))
+    assert (layer.startTimeCode, layer.endTimeCode) == (1001.0, 1096.0)
+    times = layer.ListTimeSamplesForPath("/Character/Tshirt.points")
+    assert list(times) == [1001.0 + i for i in range(96)]
+    prov = layer.customLayerData["cloth_usd"]
+    assert prov["garments"]["/Character/Tshirt"]["tier"] == "skinning"
+    assert prov["source_layer"].endswith("scene.usda")
+    assert len(prov["body_models"]["neutral"]["sha256"]) == 64
+    # Composed through the shot layer: time-sampled, following the walk forward (+Z, Y-up metres).
+    first, last = _points(shot, "/Character/Tshirt", 1001), _points(shot, "/Character/Tshirt", 1096)
+    np.testing.assert_allclose(first, _rest(WALK, "/Character/Tshirt"), atol=1e-5)  # frame 0 is the rest pose
+    advance = last.mean(axis=0) - first.mean(axis=0)
+    assert 3.0 < advance[2] < 5.0 and abs(advance[0]) < 0.3
+    stage = Usd.Stage.Open(str(shot))
+    assert stage.GetPrimAtPath("/Character/Skeleton").IsA(UsdSkel.Skeleton)
+
+
+def test_zup_centimetre_stage_round_trips_units_and_axis(tmp_path):
+    cache = tmp_path / "cache.usdc"
+    assert main(["bake", str(ZUP), "-o", str(cache), "--frames", "1001:1024:23"]) == 0
+    layer = Sdf.Layer.FindOrOpen(str(cache))
+    assert layer.pseudoRoot.GetInfo("upAxis") == "Z" and layer.pseudoRoot.GetInfo("metersPerUnit") == 0.01
+    assert list(layer.ListTimeSamplesForPath("/Character/Tshirt.points")) == [1001.0, 1024.0]
+    first = np.array(layer.QueryTimeSample("/Character/Tshirt.points", 1001.0))
+    np.testing.assert_allclose(first, _rest(ZUP, "/Character/Tshirt"), atol=1e-3)  # centimetres
+    assert 30.0 < np.ptp(first[:, 2]) < 90.0  # shirt height in cm, along Z
+    last = np.array(layer.QueryTimeSample("/Character/Tshirt.points", 1024.0))
+    assert (last.mean(axis=0) - first.mean(axis=0))[1] < -50.0  # the body walks to +Z_smpl = -Y_stage
+
+
+def test_frames_step_and_garment_selection(tmp_path):
+    cache = tmp_path / "cache.usda"
+    assert main(["bake", str(WALK), "-o", str(cache), "--frames", "1010:1020:5",
+                 "--garment", "/Character/Tshirt", "--tier", "skinning"]) == 0
+    layer = Sdf.Layer.FindOrOpen(str(cache))
+    assert list(layer.ListTimeSamplesForPath("/Character/Tshirt.points")) == [1010.0, 1015.0, 1020.0]
+
+
+def test_refuses_overwrite_without_force(tmp_path, capsys):
+    cache = tmp_path / "cache.usdc"
+    cache.write_bytes(b"keep me")
+    assert main(["bake", str(WALK), "-o", str(cache), "--frames", "1001:1002"]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert cache.read_bytes() == b"keep me"
+    assert main(["bake", str(WALK), "-o", str(cache), "--frames", "1001:1002", "--force"]) == 0
+
+
+def test_inspect_and_doctor(capsys):
+    assert main(["inspect", str(WALK)]) == 0
+    out = capsys.readouterr().out
+    assert "/Character/Skeleton" in out and "/Character/Tshirt" in out and "tshirt" in out
+    assert "1001..1096" in out and "problems    0" in out
+    assert main(["doctor"]) == 0
+    out = capsys.readouterr().out
+    assert "FAIL" not in out and "body model" in out
+
+
+def _broken(tmp_path: Path, edit) -> Path:
+    """A copy of the walk sample with one contract violation."""
+    path = tmp_path / "broken.usda"
+    shutil.copy(WALK, path)
+    stage = Usd.Stage.Open(str(path))
+    edit(stage)
+    stage.GetRootLayer().Save()
+    return path
+
+
+def _rename_joint(stage):
+    skel = UsdSkel.Skeleton(stage.GetPrimAtPath("/Character/Skeleton"))
+    joints = [j.replace("left_elbow", "left_elbo") for j in skel.GetJointsAttr().Get()]
+    skel.GetJointsAttr().Set(joints)
+
+
+def _reparent_joint(stage):
+    skel = UsdSkel.Skeleton(stage.GetPrimAtPath("/Character/Skeleton"))
+    joints = [str(j) for j in skel.GetJointsAttr().Get()]
+    # left_knee hangs under right_hip instead of left_hip.
+    joints = [j.replace("pelvis/left_hip/left_knee", "pelvis/right_hip/left_knee") for j in joints]
+    skel.GetJointsAttr().Set(joints)
+
+
+def _drop_body(stage):
+    stage.GetPrimAtPath("/Character/Tshirt").RemoveProperty("cloth:body")
+
+
+def _nan_points(stage):
+    attr = UsdGeom.Mesh(stage.GetPrimAtPath("/Character/Tshirt")).GetPointsAttr()
+    pts = np.array(attr.Get())
+    pts[7, 1] = np.nan
+    attr.Set(Vt.Vec3fArray.FromNumpy(pts.astype(np.float32)))
+
+
+@pytest.mark.parametrize("edit, expect", [
+    (_rename_joint, r"/Character/Skeleton.*left_elbow"),
+    (_reparent_joint, r"/Character/Skeleton.*left_knee"),
+    (_drop_body, r"/Character/Tshirt.*cloth:body"),
+    (_nan_points, r"/Character/Tshirt.*(NaN|non-finite)"),
+])
+def test_contract_errors_are_one_line_and_write_nothing(tmp_path, capsys, edit, expect):
+    scene = _broken(tmp_path, edit)
+    cache, shot = tmp_path / "cache.usdc", tmp_path / "shot.usda"
+    assert main(["bake", str(scene), "-o", str(cache), "--shot", str(shot)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and err.startswith("cloth-usd: error: ")
+    assert "broken.usda" in err
+    import re
+    assert re.search(expect, err), err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["broken.usda"]
+
+
+@pytest.mark.parametrize("args, expect", [
+    (["--frames", "1050:1001"], "--frames '1050:1001': empty range"),
+    (["--frames", "abc"], "--frames 'abc'"),
+    (["--tier", "ultra"], "--tier 'ultra': unknown tier (valid: skinning, coarse, detail)"),
+    (["--tier", "detail"], "tier 'detail' needs a trained model bundle"),
+    (["--garment", "/Nope"], "--garment /Nope: no garment"),
+    (["--body-model", "/no/such/body.npz"], "/no/such/body.npz: body model file not found"),
+])
+def test_argument_errors(tmp_path, capsys, args, expect):
+    cache = tmp_path / "cache.usdc"
+    assert main(["bake", str(WALK), "-o", str(cache), *args]) == 2
+    err = capsys.readouterr().err
+    assert expect in err and len(err.strip().splitlines()) == 1
+    assert not cache.exists()
+
+
+def test_empty_stage_range_and_unreadable_file(tmp_path, capsys):
+    scene = _broken(tmp_path, lambda s: (s.SetStartTimeCode(1010), s.SetEndTimeCode(1001)))
+    assert main(["bake", str(scene), "-o", str(tmp_path / "c.usdc")]) == 2
+    assert "broken.usda: empty frame range" in capsys.readouterr().err
+    junk = tmp_path / "junk.usda"
+    junk.write_text("this is not usd")
+    assert main(["bake", str(junk), "-o", str(tmp_path / "c.usdc")]) == 2
+    assert "junk.usda" in capsys.readouterr().err
+    assert main(["bake", str(tmp_path / "missing.usda"), "-o", str(tmp_path / "c.usdc")]) == 2
+    assert "missing.usda" in capsys.readouterr().err
+
+
+def test_verbose_shows_the_traceback(tmp_path, capsys):
+    assert main(["-v", "bake", str(WALK), "-o", str(tmp_path / "c.usdc"), "--tier", "ultra"]) == 2
+    assert "Traceback" in capsys.readouterr().err
+
+
+def test_python_api(tmp_path):
+    import cloth_usd
+
+    result = cloth_usd.bake(WALK, tmp_path / "cache.usdc", frames="1001:1004")
+    assert result.times.tolist() == [1001.0, 1002.0, 1003.0, 1004.0]
+    assert result.garments[0].vertices == _rest(WALK, "/Character/Tshirt").shape[0]
