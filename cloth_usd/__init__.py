@@ -19,11 +19,11 @@ from .errors import ClothUsdError
 
 def __getattr__(name: str) -> Any:
     if name == "bake":
-        from .bake import bake
+        from .baker import bake
 
         return bake
     if name == "inspect_stage":
-        from .inspect import inspect_stage
+        from .inspection import inspect_stage
 
         return inspect_stage
     raise AttributeError(f"module 'cloth_usd' has no attribute {name!r}")

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import traceback
 from typing import Sequence
 
 from . import __version__
@@ -38,11 +39,30 @@ def _parser() -> argparse.ArgumentParser:
     d = sub.add_parser("doctor", help="check the body model file(s) and the runtime")
     d.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
     d.add_argument("--gender", default="neutral", help="file to pick inside a folder: neutral, female, male")
+    r = sub.add_parser("render", help="draw body and garments at some frames to a PNG (a preview)")
+    r.add_argument("scene", help="USD stage or shot layer to read")
+    r.add_argument("-o", "--output", required=True, help="PNG to write")
+    r.add_argument("--frames", required=True, help="comma-separated time codes, e.g. 1001,1030,1060")
+    r.add_argument("--view", default="three-quarter", help="front, side or three-quarter")
+    r.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
     return p
 
 
+def _render(args: argparse.Namespace) -> int:
+    from .errors import ArgumentError
+    from .render import render_frames
+
+    try:
+        frames = [float(f) for f in args.frames.split(",")]
+    except ValueError:
+        raise ArgumentError(f"--frames '{args.frames}': expected comma-separated time codes") from None
+    out = render_frames(args.scene, frames, args.output, body_model=args.body_model, view=args.view)
+    sys.stdout.write(f"wrote {out}\n")
+    return 0
+
+
 def _inspect(args: argparse.Namespace) -> int:
-    from .inspect import format_report, inspect_stage
+    from .inspection import format_report, inspect_stage
 
     report = inspect_stage(args.scene)
     sys.stdout.write(format_report(report) + "\n")
@@ -50,7 +70,7 @@ def _inspect(args: argparse.Namespace) -> int:
 
 
 def _bake(args: argparse.Namespace) -> int:
-    from .bake import bake
+    from .baker import bake
 
     result = bake(args.scene, args.output, shot=args.shot, frames=args.frames, garments=args.garment,
                   tier=args.tier, force=args.force, body_model=args.body_model,
@@ -81,10 +101,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="cloth-usd: %(levelname)s: %(message)s")
     try:
-        return {"inspect": _inspect, "bake": _bake, "doctor": _doctor}[args.command](args)
+        commands = {"inspect": _inspect, "bake": _bake, "doctor": _doctor, "render": _render}
+        return commands[args.command](args)
     except ClothUsdError as exc:
         if args.verbose:
-            log.exception("failed")
+            sys.stderr.write(traceback.format_exc())
         sys.stderr.write(f"cloth-usd: error: {exc}\n")
         return 2
     except KeyboardInterrupt:

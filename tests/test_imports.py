@@ -18,4 +18,4 @@ def test_package_import_is_cheap():
 
 
 def test_bake_path_needs_no_torch():
-    assert "torch" not in _loaded_after("import cloth_usd.bake, cloth_usd.usd.write, cloth_usd.cli")
+    assert "torch" not in _loaded_after("import cloth_usd.baker, cloth_usd.usd.write, cloth_usd.cli")

@@ -1,0 +1,83 @@
+"""Render a frame of a shot (body + garments) to PNG, to look at a bake.
+
+Uses matplotlib (the ``train`` extra) with flat Lambert shading: a preview, not a
+production render. The body comes from the body model, the garment points from the
+composed stage, so what is drawn is what a USD viewer would show.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .core.body import load_body_model, posed_vertices, shape_body
+from .core.frames import reorient_poses, rest_orientation
+from .errors import ClothUsdError
+
+__all__ = ["render_frames"]
+
+_VIEWS = {"front": (0.0, 0.0), "side": (0.0, 90.0), "three-quarter": (10.0, 35.0)}
+
+
+def _shade(tri: np.ndarray, light: np.ndarray) -> np.ndarray:
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+    return 0.35 + 0.65 * np.abs(n @ light)
+
+
+def render_frames(stage_path: str | Path, frames: Sequence[float], output: str | Path, *,
+                  body_model: str | Path | None = None, view: str = "three-quarter",
+                  size: tuple[float, float] = (4.0, 5.0)) -> Path:
+    """Draw body and garments at each frame side by side into one PNG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+    from pxr import UsdGeom
+
+    from .usd.read import garment_from_internal, open_stage, read_motion, read_scene
+
+    if view not in _VIEWS:
+        raise ClothUsdError(f"--view '{view}': unknown (valid: {', '.join(_VIEWS)})")
+    stage = open_stage(stage_path)
+    scene = read_scene(stage)
+    times = np.asarray(frames, dtype=np.float64)
+    fig = plt.figure(figsize=(size[0] * len(times), size[1]), dpi=100)
+    light = np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8])
+    for i, t in enumerate(times):
+        ax = fig.add_subplot(1, len(times), i + 1, projection="3d")
+        meshes = []
+        for char in scene.characters:
+            body = load_body_model(body_model, gender=char.gender)
+            _, joints = shape_body(body, char.betas)
+            motion = read_motion(stage, char, times[i:i + 1])
+            poses = reorient_poses(motion.poses, rest_orientation(char.rest_joints, joints))
+            verts = posed_vertices(body, char.betas, poses, motion.root_position - joints[0])[0]
+            meshes.append((verts[body.faces], (0.85, 0.68, 0.58)))
+        for g in scene.garments:
+            pts = np.asarray(UsdGeom.Mesh(stage.GetPrimAtPath(g.prim_path)).GetPointsAttr().Get(float(t)),
+                             dtype=np.float64)
+            to_internal = np.linalg.inv(garment_from_internal(stage, g.prim_path, times[i:i + 1])[0])
+            pts = pts @ to_internal[:3, :3].T + to_internal[:3, 3]
+            meshes.append((pts[g.triangles], (0.25, 0.45, 0.75)))
+        # One collection, so matplotlib depth-sorts body and garment triangles together.
+        tris = np.concatenate([m[0] for m in meshes])[:, :, [0, 2, 1]]  # matplotlib's z is up
+        colors = np.concatenate([np.broadcast_to(c, (m.shape[0], 3)) for m, c in meshes])
+        shade = _shade(tris, light[[0, 2, 1]])[:, None] * colors
+        ax.add_collection3d(Poly3DCollection(tris, facecolors=shade, edgecolors="none"))
+        allpts = np.concatenate([m[0].reshape(-1, 3) for m in meshes])[:, [0, 2, 1]]
+        center, radius = allpts.mean(axis=0), np.ptp(allpts, axis=0).max() / 2
+        for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), center):
+            setter(c - radius, c + radius)
+        ax.set_box_aspect((1, 1, 1))
+        elev, azim = _VIEWS[view]
+        ax.view_init(elev=elev, azim=azim - 90)
+        ax.set_axis_off()
+        ax.set_title(f"time code {t:g}")
+    output = Path(output)
+    fig.savefig(output, bbox_inches="tight")
+    plt.close(fig)
+    return output
