@@ -7,6 +7,8 @@ Requires the ``train`` extra (torch, smplx).
 
 from __future__ import annotations
 
+import contextlib
+import io
 from types import SimpleNamespace
 from typing import Any
 
@@ -35,5 +37,6 @@ def to_smplx(body: BodyModel, *, batch_size: int = 1) -> Any:
         J_regressor=body.J_regressor, weights=body.weights, kintree_table=kintree,
         f=body.faces,
     )
-    return smplx.SMPL(model_path="", data_struct=data, vertex_ids=body.vertex_ids,
-                      num_betas=body.num_betas, batch_size=batch_size)
+    with contextlib.redirect_stdout(io.StringIO()):  # smplx prints a warning for 10 betas
+        return smplx.SMPL(model_path="", data_struct=data, vertex_ids=body.vertex_ids,
+                          num_betas=body.num_betas, batch_size=batch_size)

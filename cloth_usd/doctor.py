@@ -69,12 +69,13 @@ def _smplx_check(body: BodyModel) -> Check:
 
 
 def _dependency_checks() -> list[Check]:
-    found = []
-    for module, what in (("pxr", "usd-core (reading and writing USD)"),
-                         ("onnxruntime", "onnxruntime (learned tiers)")):
-        ok = importlib.util.find_spec(module) is not None
-        found.append(Check(module, ok, what + ("" if ok else ": not installed")))
-    return found
+    pxr = importlib.util.find_spec("pxr") is not None
+    ort = importlib.util.find_spec("onnxruntime") is not None
+    return [
+        Check("pxr", pxr, "usd-core" + ("" if pxr else ": not installed (pip install usd-core)")),
+        Check("onnxruntime", True, "installed" if ort else
+              "not installed: the skinning tier works; coarse and detail need pip install 'cloth-usd[runtime]'"),
+    ]
 
 
 def run_checks(body_model: str | Path | None = None, *, gender: str = "neutral",

@@ -15,6 +15,6 @@ fi
 "$VENV/bin/python" -m pip install -q -e ".[dev]"
 if [ "${1:-}" != "--no-sample" ]; then
     mkdir -p out
-    "$VENV/bin/cloth-usd" bake samples/walk_tshirt/shot.usda -o out/walk_tshirt_cache.usdc \
+    "$VENV/bin/cloth-usd" bake samples/walk_tshirt/scene.usda -o out/walk_tshirt_cache.usdc \
         --shot out/walk_tshirt_shot.usda --force
 fi
