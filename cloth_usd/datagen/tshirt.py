@@ -17,7 +17,7 @@ import trimesh
 from ..core.association import associate
 from ..core.body import BodyModel, shape_body
 
-__all__ = ["TShirtParams", "make_tshirt"]
+__all__ = ["TShirtParams", "make_tshirt", "tshirt_variants"]
 
 _PELVIS, _NECK, _HEAD, _L_SHOULDER, _R_SHOULDER = 0, 12, 15, 16, 17
 
@@ -27,7 +27,9 @@ class TShirtParams:
     """Cut and fit of a T-shirt; lengths in metres."""
 
     hem: float = -0.06
-    """Hem height relative to the pelvis joint (negative is lower)."""
+    """Hem height relative to the pelvis joint (negative is lower). A hem cut from the
+    body surface cannot pass the crotch (it would open leg holes), so a lower hem is
+    raised, a centimetre at a time, until the cut has a single hem loop."""
     sleeve: float = 0.16
     """Sleeve length along the arm, from the shoulder joint."""
     ease: float = 0.012
@@ -43,9 +45,29 @@ class TShirtParams:
     smooth_iterations: int = 12
 
 
-def _region(v: np.ndarray, joints: np.ndarray, weights: np.ndarray, p: TShirtParams) -> np.ndarray:
-    """(V,) bool: body vertices the shirt covers."""
+def _count_rims(faces: np.ndarray) -> int:
+    """Number of boundary loops of a triangle mesh."""
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    uniq, counts = np.unique(edges, axis=0, return_counts=True)
+    rim = uniq[counts == 1]
+    return len(trimesh.graph.connected_components(rim)) if len(rim) else 0
+
+
+def hem_height(body: BodyModel, v: np.ndarray, joints: np.ndarray, p: TShirtParams) -> float:
+    """The hem's height [m]: the asked one, raised until the cut has one hem loop (4 rims:
+    hem, neckline, two sleeves) rather than two leg openings."""
     hem_y = joints[_PELVIS, 1] + p.hem
+    for _ in range(30):
+        _, faces = _submesh(v, body.faces, _region(v, joints, body.weights, p, hem_y))
+        if _count_rims(faces) <= 4:
+            return hem_y
+        hem_y += 0.01
+    return hem_y
+
+
+def _region(v: np.ndarray, joints: np.ndarray, weights: np.ndarray, p: TShirtParams,
+            hem_y: float) -> np.ndarray:
+    """(V,) bool: body vertices the shirt covers."""
     sleeve_x = np.abs(joints[[_L_SHOULDER, _R_SHOULDER], 0]).mean() + p.sleeve
     neck = joints[_NECK]
     keep = (v[:, 1] > hem_y) & (np.abs(v[:, 0]) < sleeve_x)
@@ -72,11 +94,11 @@ def _boundary_vertices(faces: np.ndarray) -> np.ndarray:
     return np.unique(uniq[counts == 1])
 
 
-def _snap_cuts(v: np.ndarray, faces: np.ndarray, joints: np.ndarray, p: TShirtParams) -> np.ndarray:
+def _snap_cuts(v: np.ndarray, faces: np.ndarray, joints: np.ndarray, p: TShirtParams,
+               hem_y: float) -> np.ndarray:
     """Move boundary vertices onto their cut: the hem plane, the sleeve-end planes."""
     v = v.copy()
     rim = _boundary_vertices(faces)
-    hem_y = joints[_PELVIS, 1] + p.hem
     sleeve_x = np.abs(joints[[_L_SHOULDER, _R_SHOULDER], 0]).mean() + p.sleeve
     at_sleeve = rim[np.abs(v[rim, 0]) > sleeve_x - 0.05]
     at_hem = rim[(v[rim, 1] < hem_y + 0.05) & (np.abs(v[rim, 0]) < sleeve_x - 0.05)]
@@ -107,14 +129,14 @@ def make_tshirt(body: BodyModel, betas: np.ndarray, params: TShirtParams = TShir
         ``(vertices (N, 3) float64 [m] canonical body frame, faces (M, 3) int64)``.
     """
     v_body, joints = shape_body(body, betas)
-    keep = _region(v_body, joints, body.weights, params)
+    hem_y = hem_height(body, v_body, joints, params)
+    keep = _region(v_body, joints, body.weights, params, hem_y)
     v, f = _submesh(v_body, body.faces, keep)
     mesh = trimesh.Trimesh(v, f, process=False)
-    hem_y = joints[_PELVIS, 1] + params.hem
     waist_y = joints[_PELVIS, 1] + 0.15
     flare = params.hem_flare * np.clip((waist_y - v[:, 1]) / (waist_y - hem_y), 0.0, 1.0)
     v = v + np.asarray(mesh.vertex_normals) * (params.ease + flare)[:, None]
-    mesh = trimesh.Trimesh(_snap_cuts(v, f, joints, params), f, process=False)
+    mesh = trimesh.Trimesh(_snap_cuts(v, f, joints, params, hem_y), f, process=False)
     trimesh.smoothing.filter_taubin(mesh, iterations=params.smooth_iterations)
     v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     while v.shape[0] * 4 <= params.target_vertices * 1.3:
@@ -125,7 +147,30 @@ def make_tshirt(body: BodyModel, betas: np.ndarray, params: TShirtParams = TShir
             edges, max(0.0, 1.0 - (params.target_vertices - v.shape[0]) / max(len(edges), 1)))))
     mesh = trimesh.Trimesh(v, f, process=True)  # merge split-edge duplicates
     trimesh.smoothing.filter_taubin(mesh, iterations=4)
-    v, f = _snap_cuts(np.asarray(mesh.vertices), np.asarray(mesh.faces), joints, params), np.asarray(mesh.faces)
+    v, f = _snap_cuts(np.asarray(mesh.vertices), np.asarray(mesh.faces), joints, params, hem_y), np.asarray(mesh.faces)
     flare = params.hem_flare * np.clip((waist_y - v[:, 1]) / (waist_y - hem_y), 0.0, 1.0)
     v = _push_out(v, v_body, body.faces, 0.6 * params.ease + flare)
     return v, f.astype(np.int64)
+
+
+def tshirt_variants(count: int = 9, *, seed: int = 0) -> list[TShirtParams]:
+    """``count`` T-shirts spanning hem (short to long), sleeve, ease, neckline and resolution.
+
+    The first variants sweep the extremes deterministically so any ``count >= 3`` holds a
+    short, a long and a loose shirt; the rest are drawn from ``seed``. Target vertex counts
+    differ (3000-4000), so every variant has its own topology.
+    """
+    rng = np.random.default_rng(seed)
+    fixed = [
+        TShirtParams(hem=0.02, sleeve=0.10, ease=0.010, target_vertices=3000),  # short, tight
+        TShirtParams(hem=-0.14, sleeve=0.22, ease=0.018, target_vertices=3900),  # long
+        TShirtParams(hem=-0.06, sleeve=0.16, ease=0.030, hem_flare=0.04, target_vertices=3400),  # loose
+    ]
+    out = fixed[:count]
+    while len(out) < count:
+        out.append(TShirtParams(
+            hem=float(rng.uniform(-0.14, 0.02)), sleeve=float(rng.uniform(0.10, 0.24)),
+            ease=float(rng.uniform(0.008, 0.03)), hem_flare=float(rng.uniform(0.0, 0.04)),
+            neck_drop=float(rng.uniform(0.04, 0.11)), neck_width=float(rng.uniform(0.06, 0.09)),
+            target_vertices=int(rng.integers(3000, 4001))))
+    return out

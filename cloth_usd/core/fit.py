@@ -1,0 +1,122 @@
+"""The fit attribute alpha: factor analysis over garment-body distances (METHOD.md).
+
+For each garment-body pair, D holds the distance of N_g* garment vertices to their
+associated unposed body vertices; factor analysis ``D - mu ~= L A`` gives each pair its
+F = 3 factors. Garments differ in topology, so the N_g* samples are taken at fixed body
+*anchor* vertices (evenly spread over the body region every garment covers): anchor k
+takes the garment vertex whose associated body vertex lies nearest to it. That makes
+column k of D mean the same place on the body for every pair (our choice; the paper
+only says "evenly distributed"). Fitting uses scikit-learn; projecting a new pair
+(``FitModel.transform``) is numpy only, so it ships with the models.
+Shape letters: N garment vertices, V body vertices, G anchors (N_g*), P pairs, F factors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from .association import Association
+
+__all__ = ["FitModel", "pair_distances", "select_anchors", "fit_factor_analysis"]
+
+
+@dataclass(frozen=True)
+class FitModel:
+    """A fitted factor-analysis model over anchor distances."""
+
+    anchors: np.ndarray
+    """(G,) int64 body vertex indices where distances are sampled."""
+    mean: np.ndarray
+    """(G,) float64 mean distance [m] (mu)."""
+    loadings: np.ndarray
+    """(G, F) float64 factor loadings (L)."""
+    noise_variance: np.ndarray
+    """(G,) float64 per-anchor noise variance [m^2] (Psi)."""
+
+    def transform(self, distances: np.ndarray) -> np.ndarray:
+        """Posterior mean of the factors (scikit-learn's ``FactorAnalysis.transform``).
+
+        Args:
+            distances: (G,) or (P, G) anchor distances [m].
+        Returns:
+            (F,) or (P, F) fit attributes alpha.
+        """
+        w = self.loadings.T  # (F, G)
+        w_psi = w / self.noise_variance
+        cov_z = np.linalg.inv(np.eye(w.shape[0]) + w_psi @ w.T)
+        return ((np.asarray(distances) - self.mean) @ w_psi.T) @ cov_z
+
+    def save(self, path: str | Path) -> None:
+        np.savez(path, anchors=self.anchors, mean=self.mean, loadings=self.loadings,
+                 noise_variance=self.noise_variance)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "FitModel":
+        with np.load(path, allow_pickle=False) as d:
+            return cls(anchors=d["anchors"], mean=d["mean"], loadings=d["loadings"],
+                       noise_variance=d["noise_variance"])
+
+
+def select_anchors(body_vertices: np.ndarray, covered: np.ndarray, count: int) -> np.ndarray:
+    """Evenly spread anchors: farthest-point sampling over the covered body vertices.
+
+    Args:
+        body_vertices: (V, 3) unposed body [m] (the mean shape).
+        covered: (V,) bool, body vertices every garment covers.
+        count: number of anchors G (N_g*), at most ``covered.sum()``.
+    Returns:
+        (G,) int64 body vertex indices, deterministic.
+    """
+    candidates = np.flatnonzero(covered)
+    count = min(count, candidates.size)
+    pts = body_vertices[candidates]
+    chosen = np.empty(count, dtype=np.int64)
+    chosen[0] = int(np.argmin(pts[:, 1]))  # start at the lowest point: deterministic
+    dist = np.linalg.norm(pts - pts[chosen[0]], axis=1)
+    for i in range(1, count):
+        chosen[i] = int(np.argmax(dist))
+        dist = np.minimum(dist, np.linalg.norm(pts - pts[chosen[i]], axis=1))
+    return candidates[chosen]
+
+
+def pair_distances(garment_points: np.ndarray, association: Association, body_vertices: np.ndarray,
+                   anchors: np.ndarray) -> np.ndarray:
+    """D's column for one pair: at each anchor, the garment-to-body distance there.
+
+    Args:
+        garment_points: (N, 3) rest garment [m], canonical body frame.
+        association: the pair's association (``vertex`` is METHOD.md's ``I``).
+        body_vertices: (V, 3) the pair's unposed body [m].
+        anchors: (G,) body vertex indices.
+    Returns:
+        (G,) float64 distances [m] ``|garment_i - body_I(i)|`` of the garment vertex i whose
+        associated body vertex is nearest to each anchor.
+    """
+    associated = body_vertices[association.vertex]  # (N, 3)
+    _, pick = cKDTree(associated).query(body_vertices[anchors])
+    return np.linalg.norm(garment_points[pick] - associated[pick], axis=1)
+
+
+def fit_factor_analysis(distances: np.ndarray, anchors: np.ndarray, *, factors: int = 3,
+                        seed: int = 0) -> tuple[FitModel, np.ndarray]:
+    """Fit ``D - mu ~= L A`` with scikit-learn's SVD-based FactorAnalysis.
+
+    Factor signs are fixed so each factor's loadings sum positive (a1 grows with
+    looseness). Args:
+        distances: (P, G) one row per garment-body pair [m].
+    Returns:
+        ``(model, alpha (P, F))``.
+    """
+    from sklearn.decomposition import FactorAnalysis
+
+    fa = FactorAnalysis(n_components=factors, svd_method="lapack", random_state=seed)
+    fa.fit(distances)
+    loadings = fa.components_.T.copy()  # (G, F)
+    loadings *= np.where(loadings.sum(axis=0) < 0, -1.0, 1.0)
+    model = FitModel(anchors=np.asarray(anchors, dtype=np.int64), mean=fa.mean_.copy(),
+                     loadings=loadings, noise_variance=fa.noise_variance_.copy())
+    return model, model.transform(distances)
