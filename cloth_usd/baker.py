@@ -131,11 +131,11 @@ def _frame_range(scene: Scene, frames: FrameRange | str | None) -> FrameRange:
     return FrameRange(info.start_time_code, info.end_time_code)
 
 
-def _resolve_tier(garment: Garment, tier: Tier | None) -> Tier:
+def _resolve_tier(garment: Garment, tier: Tier | None, source: str) -> Tier:
     chosen = garment.tier or tier or Tier.SKINNING
     if chosen is not Tier.SKINNING:
         raise ArgumentError(
-            f"{garment.prim_path}: tier '{chosen.value}' needs a trained model bundle for "
+            f"{source} {garment.prim_path}: tier '{chosen.value}' needs a trained model bundle for "
             f"category '{garment.category.value}', and none is installed (available: skinning)")
     return chosen
 
@@ -172,7 +172,7 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
     scene = read_scene(stage)
     source = scene.stage.identifier
     chosen = _select_garments(scene, garments, source)
-    tiers = {g.prim_path: _resolve_tier(g, tier) for g in chosen}
+    tiers = {g.prim_path: _resolve_tier(g, tier, source) for g in chosen}
     frange = _frame_range(scene, frames)
     times = frange.times()
 

@@ -13,6 +13,7 @@ __all__ = [
     "GarmentError",
     "OutputExistsError",
     "ArgumentError",
+    "MotionFileError",
 ]
 
 
@@ -38,3 +39,7 @@ class OutputExistsError(ClothUsdError):
 
 class ArgumentError(ClothUsdError):
     """A command-line or API argument is out of range or malformed."""
+
+
+class MotionFileError(ClothUsdError):
+    """A motion file (BVH, AMASS ``.npz``) is missing, malformed or lacks a joint or key."""

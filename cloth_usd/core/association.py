@@ -73,9 +73,35 @@ def closest_point_on_triangles(tri: np.ndarray, p: np.ndarray) -> tuple[np.ndarr
     bary[at_a] = (1.0, 0.0, 0.0)
     bary[at_b] = (0.0, 1.0, 0.0)
     bary[at_c] = (0.0, 0.0, 1.0)
-    bary = np.nan_to_num(bary, nan=1.0 / 3.0)
+    # Degenerate (zero-area or collinear) triangles: the region tests above run on
+    # round-off, so take the nearest of the three edges as segments instead.
+    normal = np.cross(ab, ac)
+    flat = np.einsum("ij,ij->i", normal, normal) <= 1e-14 * (
+        np.einsum("ij,ij->i", ab, ab) * np.einsum("ij,ij->i", ac, ac))
+    flat |= ~np.isfinite(bary).all(axis=1)
+    if np.any(flat):
+        bary[flat] = _nearest_edge_barycentric(tri[flat], p[flat])
     closest = np.einsum("pk,pkc->pc", bary, tri)
     return closest, bary
+
+
+def _nearest_edge_barycentric(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(P, 3) barycentrics of the closest point on the triangle's three edge segments."""
+    best_d = np.full(p.shape[0], np.inf)
+    best = np.zeros((p.shape[0], 3))
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        a, e = tri[:, i], tri[:, j] - tri[:, i]
+        ee = np.einsum("ij,ij->i", e, e)
+        with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+            t = np.where(ee > 0, np.einsum("ij,ij->i", p - a, e) / ee, 0.0)
+        t = np.clip(np.nan_to_num(t, nan=0.0), 0.0, 1.0)
+        d = np.linalg.norm(a + t[:, None] * e - p, axis=1)
+        better = d < best_d
+        best_d[better] = d[better]
+        b = np.zeros((p.shape[0], 3))
+        b[:, i], b[:, j] = 1.0 - t, t
+        best[better] = b[better]
+    return best
 
 
 def _incident_faces(faces: np.ndarray, num_vertices: int) -> np.ndarray:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -90,6 +91,8 @@ def _sha256(path: Path) -> str:
 
 def _read_raw(path: Path) -> dict[str, Any]:
     if path.suffix == ".npz":
+        if path.is_file() and not zipfile.is_zipfile(path):  # np.load would try to unpickle it
+            raise BodyModelError(f"{path}: not a readable .npz file (not a zip archive of arrays)")
         try:
             with np.load(path, allow_pickle=False) as data:
                 return {k: data[k] for k in data.files}
@@ -168,12 +171,17 @@ def body_model_from_arrays(raw: Mapping[str, Any], *, source: str = "<arrays>",
     if np.any(np.abs(weights.sum(axis=1) - 1.0) > 1e-3) or np.any(weights < -1e-6):
         raise BodyModelError(f"{path}: key 'weights' rows must be non-negative and sum to 1")
     faces = _array(raw, "f", path, 2).astype(np.int64)
-    if faces.shape[1] != 3 or faces.min() < 0 or faces.max() >= num_v:
+    if faces.shape[1] != 3 or faces.size == 0 or faces.min() < 0 or faces.max() >= num_v:
         raise BodyModelError(f"{path}: key 'f' must be (F, 3) triangles indexing {num_v} vertices")
     kintree = np.asarray(raw["kintree_table"]) if "kintree_table" in raw else None
     if kintree is None:
         raise BodyModelError(f"{path}: missing key 'kintree_table'")
-    parents = kintree[0].astype(np.int64)
+    try:
+        parents = np.array(kintree[0], dtype=np.int64, ndmin=1)
+    except (TypeError, ValueError, IndexError, OverflowError) as exc:
+        raise BodyModelError(f"{path}: key 'kintree_table' is not a (2, 24) integer table ({exc})") from exc
+    if parents.shape != (NUM_JOINTS,):
+        raise BodyModelError(f"{path}: key 'kintree_table' has shape {kintree.shape}, expected (2, 24)")
     parents[0] = -1  # official files store 4294967295 (uint32 -1)
     if parents.shape != (NUM_JOINTS,) or not np.array_equal(parents, PARENTS):
         raise BodyModelError(f"{path}: key 'kintree_table' is not SMPL's 24-joint tree "

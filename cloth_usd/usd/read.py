@@ -283,7 +283,13 @@ def _read_betas(prim: Usd.Prim, where: str) -> tuple[np.ndarray, bool]:
     if value is None:
         _log.warning("%s: no smpl:betas authored; using zeros (the mean shape)", where)
         return np.zeros(NUM_BETAS), False
-    betas = np.asarray(value, dtype=np.float64).reshape(-1)
+    try:
+        betas = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise SceneError(
+            f"{where}: smpl:betas is {type(value).__name__} {str(value)[:60]!r}, not numbers; "
+            f"author float[] smpl:betas with at most {NUM_BETAS} values"
+        ) from None
     if betas.size > NUM_BETAS:
         raise SceneError(
             f"{where}: smpl:betas has {betas.size} values; author at most {NUM_BETAS}"
@@ -371,7 +377,9 @@ def _posed_world_transforms(
     The skeleton's own transforms come from its animation source, or are the rest
     transforms when it has none; the Skeleton prim's local-to-world is applied at t.
     """
-    animated = bool(query.GetAnimQuery())
+    anim = query.GetAnimQuery()
+    animated = bool(anim)
+    anim_joints = len(anim.GetJointOrder()) if animated else 0
     xf_cache = UsdGeom.XformCache()
     num_joints = rest_skel.shape[0]
     out = np.empty((len(times), num_joints, 4, 4))
@@ -380,7 +388,11 @@ def _posed_world_transforms(
         xf_cache.SetTime(tc)
         skel = rest_skel
         if animated:
-            skel = _row_to_col(query.ComputeJointSkelTransforms(tc))
+            # UsdSkel falls back to the rest pose (with a warning) when the components
+            # disagree in size, so check them first.
+            sizes = {len(c) for c in anim.ComputeJointLocalTransformComponents(tc)}
+            skel = _row_to_col(query.ComputeJointSkelTransforms(tc)) if sizes == {
+                anim_joints} else np.empty((0, 4, 4))
             if skel.shape != rest_skel.shape:
                 raise SceneError(
                     f"{where}: UsdSkel could not compute the joint transforms at time code "
@@ -638,5 +650,9 @@ def _where(stage: Usd.Stage, prim: Usd.Prim) -> str:
 
 def _tf_reason(exc: Tf.ErrorException) -> str:
     """The quoted reasons in a Tf error, most specific first."""
-    reasons = re.findall(r": '(.*)'\s*$", str(exc), flags=re.MULTILINE)
-    return "; ".join(reasons) if reasons else str(exc).strip()
+    try:
+        text = str(exc)
+    except UnicodeDecodeError:  # USD quotes the offending bytes, which may not be UTF-8
+        return "the file holds bytes that are not valid UTF-8 text"
+    reasons = re.findall(r": '(.*)'\s*$", text, flags=re.MULTILINE)
+    return "; ".join(reasons) if reasons else text.strip()

@@ -39,8 +39,11 @@ def check_output_path(path: str | Path, *, force: bool, protected: Iterable[str]
     path = Path(path)
     if path.suffix not in _FORMATS:
         raise ArgumentError(f"{path}: output must end in .usdc, .usda or .usd")
-    if not path.parent.exists():
-        raise ArgumentError(f"{path}: folder '{path.parent}' does not exist")
+    if not path.parent.is_dir():
+        what = "is not a folder" if path.parent.exists() else "does not exist"
+        raise ArgumentError(f"{path}: folder '{path.parent}' {what}")
+    if path.is_dir():
+        raise ArgumentError(f"{path}: is a folder; name a layer file to write")
     real = os.path.realpath(path)
     if any(real == os.path.realpath(p) for p in protected if p):
         raise ArgumentError(f"{path}: is a layer of the source stage; cloth_usd never writes into "

@@ -1,0 +1,520 @@
+"""BVH motion capture: a reader, and a retargeter onto the 24 SMPL joints.
+
+Shape letters: T frames, J BVH joints, C channels. A BVH joint's local transform is
+``translate(offset) @ R`` with ``R`` the product of its rotation channels in the order
+they are listed (``Zrotation Xrotation Yrotation`` gives ``Rz @ Rx @ Ry``, angles in
+degrees); a joint with position channels takes them as its local translation instead
+of its OFFSET (as Blender's importer does).
+
+Retargeting works on world-space rotation deltas, so the two skeletons need not share
+bone lengths, joint counts or local axes. The ASSUMPTION: in the reference posture
+(the BVH rest, every channel zero, unless ``reference_frame`` names a frame) the
+character stands in a T-pose facing +Z of SMPL's frame after the ``up_axis``
+conversion, i.e. in the posture of SMPL's rest. Mixamo and most Truebones files are
+authored that way; files whose rest is not a T-pose (many CMU conversions) need
+``reference_frame`` pointing at a T-pose frame. A warning is logged when the
+reference posture's left upper arm is far from +X.
+"""
+
+from __future__ import annotations
+
+import logging
+import re
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..core.rotations import matrix_to_axis_angle
+from ..core.smpl import JOINT_NAMES, NUM_JOINTS, PARENTS
+from ..errors import ArgumentError
+from .motion import MotionFileError, blend_from_rest, resample
+
+__all__ = [
+    "Bvh",
+    "BvhError",
+    "DEFAULT_BVH_MAPPING",
+    "REQUIRED_JOINTS",
+    "SMPL_NAMED_BVH_MAPPING",
+    "bvh_forward_kinematics",
+    "detect_scale",
+    "load_bvh",
+    "parse_bvh",
+    "read_bvh",
+    "retarget_bvh",
+]
+
+log = logging.getLogger(__name__)
+
+_AXES = ("X", "Y", "Z")
+
+
+class BvhError(MotionFileError):
+    """A BVH file is malformed, or lacks a joint the retargeting needs."""
+
+
+@dataclass(frozen=True)
+class Bvh:
+    """A parsed BVH file: the hierarchy and the raw channel values."""
+
+    names: tuple[str, ...]
+    """(J,) joint names, in file order (a parent precedes its children)."""
+    parents: np.ndarray
+    """(J,) int64 parent index of each joint; -1 for a root."""
+    offsets: np.ndarray
+    """(J, 3) float64 OFFSET of each joint from its parent [file units]."""
+    channels: tuple[tuple[str, ...], ...]
+    """(J,) channel names of each joint, in file order (e.g. ``"Zrotation"``)."""
+    end_sites: np.ndarray
+    """(E, 3) float64 End Site offsets from their parent joint [file units]."""
+    end_site_parents: np.ndarray
+    """(E,) int64 joint index each End Site hangs from."""
+    frame_time: float
+    """Seconds per frame [s]."""
+    motion: np.ndarray
+    """(T, C) float64 channel values, joints' channels concatenated in file order
+    (positions in file units, rotations in degrees)."""
+    source: str = "<string>"
+    """Where the text came from (a file path), for messages."""
+
+    @property
+    def num_frames(self) -> int:
+        """T."""
+        return int(self.motion.shape[0])
+
+    @property
+    def fps(self) -> float:
+        """Frame rate [1/s]."""
+        return 1.0 / self.frame_time
+
+    def channel_start(self) -> np.ndarray:
+        """(J,) int64 column of each joint's first channel in :attr:`motion`."""
+        counts = np.array([len(c) for c in self.channels], dtype=np.int64)
+        return np.concatenate([[0], np.cumsum(counts)[:-1]]).astype(np.int64)
+
+
+# --------------------------------------------------------------------------- reading
+def read_bvh(path: str | Path) -> Bvh:
+    """Read a BVH file. Raises :class:`BvhError` naming the file (and line) at fault."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError as exc:
+        raise BvhError(f"{path}: cannot read BVH file: {exc.strerror or exc}") from exc
+    return parse_bvh(text, source=str(path))
+
+
+_CHANNEL_RE = re.compile(r"^([XYZ])(position|rotation)$", re.IGNORECASE)
+
+
+def parse_bvh(text: str, *, source: str = "<string>") -> Bvh:
+    """Parse BVH text (HIERARCHY and MOTION sections); ``source`` names it in errors."""
+    tokens = [(tok, i + 1) for i, line in enumerate(text.splitlines()) for tok in line.split()]
+    pos = 0
+
+    def fail(msg: str, line: int | None = None) -> BvhError:
+        where = f"{source}:{line}" if line is not None else source
+        return BvhError(f"{where}: {msg}")
+
+    def take(expected: str | None = None, what: str | None = None) -> tuple[str, int]:
+        """The next token; ``expected`` is a literal it must equal, ``what`` describes it."""
+        nonlocal pos
+        if pos >= len(tokens):
+            raise fail(f"unexpected end of file (expected {expected or what or 'more data'})",
+                       tokens[-1][1] if tokens else None)
+        tok, line = tokens[pos]
+        pos += 1
+        if expected is not None and tok.upper() != expected.upper():
+            raise fail(f"expected {expected!r}, found {tok!r}", line)
+        return tok, line
+
+    def number(what: str) -> float:
+        tok, line = take()
+        try:
+            return float(tok)
+        except ValueError:
+            raise fail(f"expected a number for {what}, found {tok!r}", line) from None
+
+    names: list[str] = []
+    parents: list[int] = []
+    offsets: list[list[float]] = []
+    channels: list[tuple[str, ...]] = []
+    end_sites: list[list[float]] = []
+    end_parents: list[int] = []
+
+    def joint_body() -> None:  # after "ROOT name" / "JOINT name"
+        index = len(names) - 1
+        take("{")
+        while True:
+            tok, line = take(what="'}' or a joint field")
+            key = tok.upper()
+            if key == "}":
+                return
+            if key == "OFFSET":
+                offsets[index] = [number("OFFSET") for _ in range(3)]
+            elif key == "CHANNELS":
+                count_tok, cline = take()
+                if not count_tok.isdigit():
+                    raise fail(f"CHANNELS count must be an integer, found {count_tok!r}", cline)
+                names_here = []
+                for _ in range(int(count_tok)):
+                    ch, chline = take()
+                    m = _CHANNEL_RE.match(ch)
+                    if m is None:
+                        raise fail(f"joint {names[index]!r}: unknown channel {ch!r} "
+                                   "(valid: X/Y/Z position, X/Y/Z rotation)", chline)
+                    names_here.append(m.group(1).upper() + m.group(2).lower())
+                channels[index] = tuple(names_here)
+            elif key == "JOINT":
+                child, _ = take(what="a joint name")
+                _new_joint(child, index)
+                joint_body()
+            elif key == "END":
+                take("Site")
+                take("{")
+                take("OFFSET")
+                end_sites.append([number("End Site OFFSET") for _ in range(3)])
+                end_parents.append(index)
+                take("}")
+            else:
+                raise fail(f"joint {names[index]!r}: unexpected {tok!r} "
+                           "(valid: OFFSET, CHANNELS, JOINT, End Site, '}')", line)
+
+    def _new_joint(name: str, parent: int) -> None:
+        names.append(name)
+        parents.append(parent)
+        offsets.append([0.0, 0.0, 0.0])
+        channels.append(())
+
+    take("HIERARCHY")
+    while pos < len(tokens) and tokens[pos][0].upper() == "ROOT":
+        take()
+        name, _ = take(what="a joint name")
+        _new_joint(name, -1)
+        joint_body()
+    if not names:
+        line = tokens[pos][1] if pos < len(tokens) else None
+        raise fail("no ROOT joint in HIERARCHY", line)
+    take("MOTION")
+    take("Frames:")
+    frames_tok, fline = take(what="a frame count")
+    if not frames_tok.isdigit():
+        raise fail(f"Frames: must be a non-negative integer, found {frames_tok!r}", fline)
+    take("Frame")
+    take("Time:")
+    frame_time = number("Frame Time")
+    if not frame_time > 0:
+        raise fail(f"Frame Time must be > 0, got {frame_time}")
+    num_frames = int(frames_tok)
+    num_channels = sum(len(c) for c in channels)
+    values = tokens[pos:]
+    if len(values) != num_frames * num_channels:
+        raise fail(f"MOTION holds {len(values)} values, expected {num_frames} frames x "
+                   f"{num_channels} channels = {num_frames * num_channels}")
+    try:
+        motion = np.array([float(v) for v, _ in values], dtype=np.float64)
+    except ValueError:
+        bad = next((v, ln) for v, ln in values if not _is_float(v))
+        raise fail(f"MOTION value {bad[0]!r} is not a number", bad[1]) from None
+    if not np.all(np.isfinite(motion)):
+        raise fail("MOTION holds non-finite values")
+    return Bvh(
+        names=tuple(names),
+        parents=np.array(parents, dtype=np.int64),
+        offsets=np.array(offsets, dtype=np.float64).reshape(-1, 3),
+        channels=tuple(channels),
+        end_sites=np.array(end_sites, dtype=np.float64).reshape(-1, 3),
+        end_site_parents=np.array(end_parents, dtype=np.int64),
+        frame_time=frame_time,
+        motion=motion.reshape(num_frames, num_channels),
+        source=source,
+    )
+
+
+def _is_float(s: str) -> bool:
+    try:
+        float(s)
+    except ValueError:
+        return False
+    return True
+
+
+# --------------------------------------------------------------------------- kinematics
+def _local_transforms(bvh: Bvh) -> tuple[np.ndarray, np.ndarray]:
+    """(T, J, 3, 3) local rotations and (T, J, 3) local translations [file units]."""
+    n, num_joints = bvh.num_frames, len(bvh.names)
+    rot = np.broadcast_to(np.eye(3), (n, num_joints, 3, 3)).copy()
+    trans = np.broadcast_to(bvh.offsets, (n, num_joints, 3)).copy()
+    for j, (start, chans) in enumerate(zip(bvh.channel_start(), bvh.channels)):
+        order = "".join(c[0] for c in chans if c.endswith("rotation"))
+        cols = [start + k for k, c in enumerate(chans) if c.endswith("rotation")]
+        if order and n:
+            rot[:, j] = Rotation.from_euler(order, bvh.motion[:, cols], degrees=True).as_matrix()
+        for k, c in enumerate(chans):
+            if c.endswith("position"):
+                trans[:, j, _AXES.index(c[0])] = bvh.motion[:, start + k]
+    return rot, trans
+
+
+def bvh_forward_kinematics(bvh: Bvh, *, rest: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """World rotations and positions of every BVH joint, in the file's axes and units.
+
+    Args:
+        rest: if True, the rest posture (every channel zero; OFFSETs only), one frame.
+    Returns:
+        ``(rotations (T, J, 3, 3), positions (T, J, 3) [file units])``; T = 1 for ``rest``.
+    """
+    if rest:
+        num_joints = len(bvh.names)
+        rot = np.broadcast_to(np.eye(3), (1, num_joints, 3, 3)).copy()
+        loc = bvh.offsets[None].copy()
+    else:
+        rot, loc = _local_transforms(bvh)
+    world_rot = np.empty_like(rot)
+    world_pos = np.empty_like(loc)
+    for j, p in enumerate(bvh.parents):
+        if p < 0:
+            world_rot[:, j], world_pos[:, j] = rot[:, j], loc[:, j]
+        else:
+            world_rot[:, j] = world_rot[:, p] @ rot[:, j]
+            world_pos[:, j] = world_pos[:, p] + np.einsum("tab,tb->ta", world_rot[:, p], loc[:, j])
+    return world_rot, world_pos
+
+
+#: Length units a BVH may be written in, [m] per unit. "cmu" is the CMU mocap unit of the
+#: cgspeed conversions (1/0.45 inch).
+_UNITS = {"m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001, "inch": 0.0254, "cmu": 0.0254 / 0.45}
+#: The rest skeleton's largest bounding-box side (joints and End Sites) of an adult [m]:
+#: height in a T-pose, roughly equal to the arm span.
+_TYPICAL_EXTENT_M = 1.65
+
+
+def detect_scale(bvh: Bvh) -> float:
+    """Guess the file's length unit from its rest skeleton's size [m per file unit].
+
+    Takes the largest side of the rest skeleton's bounding box (height or arm span,
+    which for people are close) and picks, among m, dm, cm, mm, inch and CMU units, the
+    unit that makes it closest (in ratio) to an adult's 1.65 m. Snapping to a unit
+    rather than normalising keeps children and tall people their size.
+    """
+    _, pos = bvh_forward_kinematics(bvh, rest=True)
+    points = pos[0]
+    if len(bvh.end_sites):
+        ends = points[bvh.end_site_parents] + bvh.end_sites  # rest: world rotations are I
+        points = np.concatenate([points, ends])
+    extent = float(np.max(np.ptp(points, axis=0)))
+    if not extent > 0:
+        raise BvhError(f"{bvh.source}: the rest skeleton has zero size; pass scale= explicitly")
+    unit = min(_UNITS, key=lambda u: abs(np.log(extent * _UNITS[u] / _TYPICAL_EXTENT_M)))
+    log.info("%s: rest skeleton spans %.4g units; reading them as %s", bvh.source, extent, unit)
+    return _UNITS[unit]
+
+
+# --------------------------------------------------------------------------- mapping
+def _mirror(name: str) -> str:
+    """A left-side (normalised) joint name -> its right-side twin."""
+    if name.startswith("left"):
+        return "right" + name[4:]
+    if name.endswith("_l"):
+        return name[:-2] + "_r"
+    if name.startswith("l_"):
+        return "r_" + name[2:]
+    if name.startswith("l"):
+        return "r" + name[1:]
+    raise ValueError(name)
+
+
+_LEFT_ALIASES = {  # normalised BVH names (lower case, namespace stripped) -> SMPL joint
+    "left_hip": ("leftupleg", "lefthip", "leftthigh", "leftupperleg", "lthigh", "l_thigh", "thigh_l",
+                 "upperleg_l"),
+    "left_knee": ("leftleg", "leftknee", "leftshin", "leftlowerleg", "lshin", "l_calf", "calf_l",
+                  "lowerleg_l"),
+    "left_ankle": ("leftfoot", "leftankle", "lfoot", "l_foot", "foot_l"),
+    "left_foot": ("lefttoebase", "lefttoe", "lefttoes", "ltoe", "l_toe", "toe_l", "ball_l"),
+    "left_collar": ("leftshoulder", "leftcollar", "leftclavicle", "lcollar", "l_clavicle", "clavicle_l"),
+    "left_shoulder": ("leftarm", "leftupperarm", "leftuparm", "lshldr", "l_upperarm", "upperarm_l"),
+    "left_elbow": ("leftforearm", "leftlowerarm", "leftelbow", "lforearm", "l_forearm", "lowerarm_l"),
+    "left_wrist": ("lefthand", "leftwrist", "lhand", "l_hand", "hand_l"),
+    "left_hand": ("lefthandmiddle1", "leftfingerbase", "lefthandindex1", "middle_01_l"),
+}
+_MID_ALIASES = {
+    "pelvis": ("hips", "hip", "pelvis"),
+    "spine1": ("lowerback", "abdomen", "spine", "spine_01"),
+    "spine2": ("spine1", "spine_02"),
+    "spine3": ("spine2", "chest", "upperchest", "spine_03"),
+    "neck": ("neck", "neck_01"),
+    "head": ("head",),
+}
+
+
+def _build_default_mapping() -> dict[str, str]:
+    table: dict[str, str] = {}
+    for smpl, names in _MID_ALIASES.items():
+        table.update(dict.fromkeys(names, smpl))
+    for smpl, names in _LEFT_ALIASES.items():
+        table.update(dict.fromkeys(names, smpl))
+        table.update(dict.fromkeys((_mirror(n) for n in names), "right_" + smpl[5:]))
+    return table
+
+
+#: BVH joint name (case-insensitive, namespace such as ``mixamorig:`` ignored) -> SMPL
+#: joint, for the common CMU / Mixamo / Truebones / Poser / Unreal naming. Where several
+#: BVH joints map to one SMPL joint (CMU's LowerBack and Spine), the first in file order wins.
+DEFAULT_BVH_MAPPING: Mapping[str, str] = _build_default_mapping()
+
+#: The same for BVH files exported from SMPL itself (``Pelvis``, ``L_Hip``, ``Spine1``...).
+SMPL_NAMED_BVH_MAPPING: Mapping[str, str] = {
+    **{n: n for n in JOINT_NAMES},
+    **{("l_" + n[5:] if n.startswith("left_") else "r_" + n[6:]): n
+       for n in JOINT_NAMES if n.startswith(("left_", "right_"))},
+}
+
+#: SMPL joints a BVH must provide; without them the garment's motion would be wrong.
+REQUIRED_JOINTS: tuple[str, ...] = ("pelvis", "left_hip", "right_hip", "left_knee", "right_knee",
+                                    "left_shoulder", "right_shoulder", "left_elbow", "right_elbow")
+
+
+def _normalise(name: str) -> str:
+    return re.split(r"[:|]", name)[-1].strip().lower()
+
+
+def _resolve_mapping(bvh: Bvh, mapping: Mapping[str, str] | None) -> dict[int, int]:
+    """SMPL joint index -> BVH joint index."""
+    if mapping is None:
+        tables = (DEFAULT_BVH_MAPPING, SMPL_NAMED_BVH_MAPPING)
+        hits = [sum(_normalise(n) in t for n in bvh.names) for t in tables]
+        mapping = tables[int(np.argmax(hits))]
+    table = {}
+    for bvh_name, smpl_name in mapping.items():
+        if smpl_name not in JOINT_NAMES:
+            raise ArgumentError(f"mapping[{bvh_name!r}] = {smpl_name!r} is not an SMPL joint; "
+                                f"valid: {', '.join(JOINT_NAMES)}")
+        table[_normalise(bvh_name)] = JOINT_NAMES.index(smpl_name)
+    found: dict[int, int] = {}
+    for b, name in enumerate(bvh.names):
+        s = table.get(_normalise(name))
+        if s is not None and s not in found:
+            found[s] = b
+    return found
+
+
+# --------------------------------------------------------------------------- retargeting
+_UP_CONVERSION = {
+    "Y": np.eye(3),
+    "Z": Rotation.from_euler("x", -90, degrees=True).as_matrix(),  # Z up, -Y forward -> Y up, +Z forward
+}
+
+
+def retarget_bvh(
+    bvh: Bvh,
+    *,
+    mapping: Mapping[str, str] | None = None,
+    fps: float | None = None,
+    up_axis: str = "Y",
+    scale: float | None = None,
+    reference_frame: int | None = None,
+    blend_seconds: float = 0.5,
+    required: Iterable[str] = REQUIRED_JOINTS,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Retarget a BVH motion onto the 24 SMPL joints.
+
+    For each mapped joint, SMPL's world rotation is ``C G(t) G_ref^-1 C^-1``: the BVH
+    world rotation at frame t relative to the reference posture (see the module
+    docstring for the T-pose assumption), with C the up-axis conversion. SMPL local
+    rotations follow through SMPL's parents; unmapped SMPL joints keep their parent's
+    world rotation (identity local rotation).
+
+    Args:
+        bvh: a parsed file (:func:`read_bvh`).
+        mapping: BVH joint name -> SMPL joint name; None picks whichever of
+            :data:`DEFAULT_BVH_MAPPING` and :data:`SMPL_NAMED_BVH_MAPPING` maps more joints.
+            To extend the default: ``{**DEFAULT_BVH_MAPPING, "MyHip": "pelvis"}``.
+        fps: output frame rate [1/s]; None keeps the file's.
+        up_axis: the file's up axis, ``"Y"`` (facing +Z) or ``"Z"`` (facing -Y).
+        scale: metres per file unit; None guesses it (:func:`detect_scale`).
+        reference_frame: a frame in which the character stands in SMPL's T-pose; None
+            uses the BVH rest posture (every channel zero).
+        blend_seconds: ease-in from the SMPL rest pose [s]; 0 keeps the motion as is.
+        required: SMPL joints that must be mapped.
+    Returns:
+        ``(poses (T, 72) axis-angle [rad], root_offset (T, 3) [m])``: the root offset is
+        the hips' displacement from frame 0, in SMPL's axes.
+    Raises:
+        BvhError: a required joint is not in the file (the message names file and joint).
+        ArgumentError: a bad ``up_axis``, ``scale``, ``fps``, ``reference_frame`` or mapping.
+    """
+    up = up_axis.upper()
+    if up not in _UP_CONVERSION:
+        raise ArgumentError(f"up_axis must be one of {', '.join(_UP_CONVERSION)}, got {up_axis!r}")
+    if scale is not None and not scale > 0:
+        raise ArgumentError(f"scale must be > 0 (metres per file unit), got {scale}")
+    if fps is not None and not fps > 0:
+        raise ArgumentError(f"fps must be > 0, got {fps}")
+    if bvh.num_frames == 0:
+        raise BvhError(f"{bvh.source}: the file has no frames")
+    if reference_frame is not None and not -bvh.num_frames <= reference_frame < bvh.num_frames:
+        raise ArgumentError(f"reference_frame {reference_frame} is outside the file's "
+                            f"{bvh.num_frames} frames ({bvh.source})")
+    found = _resolve_mapping(bvh, mapping)
+    missing = [name for name in required if JOINT_NAMES.index(name) not in found]
+    if missing:
+        wanted = missing[0]
+        aliases = sorted(k for k, v in (mapping or DEFAULT_BVH_MAPPING).items() if v == wanted)
+        raise BvhError(f"{bvh.source}: no BVH joint maps to the SMPL joint {wanted!r} "
+                       f"(missing: {', '.join(missing)}; looked for {', '.join(aliases) or 'nothing'}); "
+                       f"the file's joints are {', '.join(bvh.names)}; pass mapping= to name them")
+
+    world_rot, world_pos = bvh_forward_kinematics(bvh)
+    conv = _UP_CONVERSION[up]
+    if reference_frame is None:
+        ref_rot, ref_pos = bvh_forward_kinematics(bvh, rest=True)
+    else:
+        ref_rot, ref_pos = world_rot[[reference_frame]], world_pos[[reference_frame]]
+    _check_t_pose(bvh, found, conv, ref_pos[0])
+    delta = conv @ world_rot @ np.swapaxes(ref_rot, -1, -2) @ conv.T  # (T, J, 3, 3)
+
+    n = bvh.num_frames
+    glob = np.empty((n, NUM_JOINTS, 3, 3))
+    local = np.empty_like(glob)
+    for s in range(NUM_JOINTS):
+        p = PARENTS[s]
+        if s in found:
+            glob[:, s] = delta[:, found[s]]
+        else:
+            glob[:, s] = np.eye(3) if p < 0 else glob[:, p]
+        local[:, s] = glob[:, s] if p < 0 else np.swapaxes(glob[:, p], -1, -2) @ glob[:, s]
+    poses = matrix_to_axis_angle(local).reshape(n, 72)
+
+    metres = detect_scale(bvh) if scale is None else float(scale)
+    hips = world_pos[:, found[0]] if 0 in found else np.zeros((n, 3))
+    root = (hips - hips[0]) @ conv.T * metres
+    if fps is not None:
+        poses, root = resample(poses, root, bvh.fps, fps)
+    out_fps = bvh.fps if fps is None else fps
+    if blend_seconds > 0:
+        poses = blend_from_rest(poses, max(1, int(round(blend_seconds * out_fps))))
+    return poses, root
+
+
+def _check_t_pose(bvh: Bvh, found: dict[int, int], conv: np.ndarray, ref_pos: np.ndarray) -> None:
+    """Warn when the reference posture's left upper arm does not point along SMPL's +X."""
+    shoulder, elbow = JOINT_NAMES.index("left_shoulder"), JOINT_NAMES.index("left_elbow")
+    if shoulder not in found or elbow not in found:
+        return
+    bone = conv @ (ref_pos[found[elbow]] - ref_pos[found[shoulder]])
+    length = np.linalg.norm(bone)
+    if length > 0 and bone[0] / length < np.cos(np.deg2rad(45)):
+        log.warning("%s: in the reference posture the left upper arm points along %s, not +X: "
+                    "the retargeting assumes a T-pose facing +Z; pass reference_frame= or up_axis=",
+                    bvh.source, np.round(bone / length, 2))
+
+
+def load_bvh(path: str | Path, **kwargs) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`read_bvh` then :func:`retarget_bvh` (keyword arguments go to the latter).
+
+    Returns:
+        ``(poses (T, 72) axis-angle [rad], root_offset (T, 3) [m])``.
+    """
+    return retarget_bvh(read_bvh(path), **kwargs)
