@@ -1,0 +1,65 @@
+"""The exported models' input/output contract (numpy only; shared by export and runtime).
+
+Coarse model inputs, in order (B frames, N vertices, K neighbours):
+
+- ``features`` (B, N, 7) float32: body normal, body position minus root translation [m], fit a1;
+- ``nbr`` (N, K) int64 neighbour table; ``nbr_mask`` (N, K) bool.
+
+Detail model inputs, in order (N2 pooled clusters, P members, K2 pooled neighbours):
+
+- ``features`` (B, N, 30) float32: normal, position minus root translation [m], 24 joint
+  distances [m];
+- ``attributes`` (B, 85) float32: fit alpha (3), SMPL beta (10), pose theta (72);
+- ``nbr``, ``nbr_mask`` (N, K); ``cluster`` (N,) int64; ``members`` (N2, P) int64,
+  ``members_mask`` (N2, P) bool; ``pooled_nbr`` (N2, K2) int64, ``pooled_nbr_mask``
+  (N2, K2) bool.
+
+Both output ``delta`` (B, N, 3) float32 displacement [m]. Every dimension is dynamic.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..core.graph import MeshGraph, NeighbourTable
+
+__all__ = ["COARSE_INPUTS", "DETAIL_INPUTS", "OUTPUT", "coarse_inputs", "detail_inputs"]
+
+COARSE_INPUTS = ("features", "nbr", "nbr_mask")
+DETAIL_INPUTS = ("features", "attributes", "nbr", "nbr_mask", "cluster", "members",
+                 "members_mask", "pooled_nbr", "pooled_nbr_mask")
+OUTPUT = "delta"
+
+
+def coarse_inputs(features: np.ndarray, table: NeighbourTable) -> dict[str, np.ndarray]:
+    """Named coarse-model inputs.
+
+    Args:
+        features: (B, N, 7) float node features.
+        table: the garment's (N, K) neighbour table.
+    """
+    return {
+        "features": np.ascontiguousarray(features, dtype=np.float32),
+        "nbr": np.ascontiguousarray(table.nbr, dtype=np.int64),
+        "nbr_mask": np.ascontiguousarray(table.mask, dtype=bool),
+    }
+
+
+def detail_inputs(features: np.ndarray, attributes: np.ndarray, graph: MeshGraph) -> dict[str, np.ndarray]:
+    """Named detail-model inputs.
+
+    Args:
+        features: (B, N, 30) float node features.
+        attributes: (B, 85) float (alpha, beta, theta) per frame.
+        graph: the garment's graph bundle.
+    """
+    p = graph.pooling
+    return {
+        **coarse_inputs(features, graph.table),
+        "attributes": np.ascontiguousarray(attributes, dtype=np.float32),
+        "cluster": np.ascontiguousarray(p.cluster, dtype=np.int64),
+        "members": np.ascontiguousarray(p.members, dtype=np.int64),
+        "members_mask": np.ascontiguousarray(p.members_mask, dtype=bool),
+        "pooled_nbr": np.ascontiguousarray(p.table.nbr, dtype=np.int64),
+        "pooled_nbr_mask": np.ascontiguousarray(p.table.mask, dtype=bool),
+    }
