@@ -1,4 +1,5 @@
-"""Ground-truth factory: garments, bodies and motions (numpy; the simulator is optional)."""
+"""Ground-truth factory: garments, bodies and motions (numpy), simulation (Newton, imported
+lazily by ``cloth_usd.datagen.simulate``) and dataset shards (``cloth_usd.datagen.dataset``)."""
 
 from .bodies import BODY_SHAPES, BodyShape, body_shapes
 from .motion import MotionKind, MotionSpec, blend_from_rest, generate, resample, walk_cycle

@@ -129,9 +129,10 @@ def blend_from_rest(poses: np.ndarray, frames: int) -> np.ndarray:
         (T, 72) poses whose frame 0 is the rest pose (when ``frames >= 1``).
     """
     out = poses.copy()
-    n = min(frames, poses.shape[0])
-    for t in range(n):
-        s = 0.5 - 0.5 * np.cos(np.pi * t / max(n, 1))  # smooth step 0 -> 1
+    # The ease keeps its length when the sequence is shorter: a 3-frame clip of a
+    # 12-frame ease-in moves gently instead of jumping to the full pose.
+    for t in range(min(frames, poses.shape[0])):
+        s = 0.5 - 0.5 * np.cos(np.pi * t / max(frames, 1))  # smooth step 0 -> 1
         rot = Rotation.from_rotvec(poses[t].reshape(24, 3))
         out[t] = (rot.as_rotvec() * s).reshape(72)  # slerp from identity = scaled rotation vector
     return out

@@ -1,0 +1,376 @@
+"""Sharded, resumable ground-truth data: one ``.npz`` shard per garment-body-motion.
+
+A shard holds the garment (rest vertices, faces), the body (betas) and motion (poses,
+transl), the simulated positions, METHOD.md's coarse target (Laplacian smoothing of
+the simulated garment), the fit-attribute inputs (each garment vertex's associated
+unposed body vertex and its distance to it) and the quality figures. A JSON
+:class:`Manifest` beside the shards records seeds, engine versions, the
+:class:`~cloth_usd.datagen.simulate.SimConfig`, per-sequence quality and the rejected
+(unstable) sequences, which are listed but never written. Files are written to a temp
+name and renamed, so a crash never leaves a half shard. Never pickle: every array is
+plain and :func:`read_shard` loads with ``allow_pickle=False``. Shape letters: T frames,
+N garment vertices, M garment triangles, V body vertices.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable, Iterable
+
+import numpy as np
+from scipy import sparse
+
+from ..core.association import associate
+from ..core.body import BodyModel, load_body_model, shape_body
+from ..errors import ClothUsdError
+from .simulate import SimConfig, SimResult, engine_versions, simulate
+
+__all__ = [
+    "DatasetError",
+    "DatasetConfig",
+    "Job",
+    "Shard",
+    "Manifest",
+    "SHARD_FORMAT",
+    "laplacian_smooth",
+    "fit_inputs",
+    "write_shard",
+    "read_shard",
+    "shard_is_valid",
+    "run_jobs",
+]
+
+log = logging.getLogger(__name__)
+
+#: Version of the shard layout; bump when keys change meaning.
+SHARD_FORMAT = 1
+MANIFEST_NAME = "manifest.json"
+
+
+class DatasetError(ClothUsdError):
+    """A shard or manifest is unreadable, or a job is malformed."""
+
+
+@dataclass(frozen=True)
+class DatasetConfig:
+    """How shards are derived from a simulation."""
+
+    coarse_iterations: int = 10
+    """Laplacian smoothing passes that make the coarse target from the simulated garment."""
+    coarse_lambda: float = 0.5
+    """Step of each smoothing pass (0 < lambda <= 1)."""
+
+    def __post_init__(self) -> None:
+        if self.coarse_iterations < 0:
+            raise DatasetError(f"DatasetConfig.coarse_iterations must be >= 0, got {self.coarse_iterations}")
+        if not 0.0 < self.coarse_lambda <= 1.0:
+            raise DatasetError(f"DatasetConfig.coarse_lambda must be in (0, 1], got {self.coarse_lambda}")
+
+
+@dataclass(frozen=True)
+class Job:
+    """One garment-body-motion sequence to simulate."""
+
+    name: str
+    """Shard stem: letters, digits, '-', '_' and '.' only."""
+    garment_vertices: np.ndarray
+    """(N, 3) float rest garment [m], canonical body frame."""
+    garment_faces: np.ndarray
+    """(M, 3) int triangles."""
+    betas: np.ndarray
+    """(B',) shape coefficients."""
+    poses: np.ndarray
+    """(T, 72) axis-angle [rad]; frame 0 is the rest pose."""
+    transl: np.ndarray
+    """(T, 3) root translation [m]."""
+    seed: int = 0
+    """The seed that drew this job's garment, body and motion (recorded in the manifest)."""
+    meta: dict = field(default_factory=dict)
+    """JSON-able provenance (garment parameters, motion name, ...)."""
+
+    def digest(self, config: SimConfig, dataset: DatasetConfig) -> str:
+        """sha256 over every input and setting: a shard is reused only when it matches."""
+        h = hashlib.sha256()
+        for arr in (self.garment_vertices, self.garment_faces, self.betas, self.poses, self.transl):
+            a = np.ascontiguousarray(arr)
+            h.update(str((a.dtype.str, a.shape)).encode())
+            h.update(a.tobytes())
+        h.update(json.dumps([config.to_json(), dataset.__dict__, SHARD_FORMAT], sort_keys=True).encode())
+        return h.hexdigest()
+
+
+@dataclass(frozen=True)
+class Shard:
+    """One sequence as stored on disk."""
+
+    garment_vertices: np.ndarray
+    """(N, 3) float32 rest garment [m]."""
+    garment_faces: np.ndarray
+    """(M, 3) int64 triangles."""
+    positions: np.ndarray
+    """(T, N, 3) float32 simulated garment [m], world frame."""
+    coarse: np.ndarray
+    """(T, N, 3) float32 coarse target [m]: Laplacian smoothing of ``positions``."""
+    betas: np.ndarray
+    """(B',) float64."""
+    poses: np.ndarray
+    """(T, 72) float64 axis-angle [rad]."""
+    transl: np.ndarray
+    """(T, 3) float64 [m]."""
+    assoc_vertex: np.ndarray
+    """(N,) int64 associated body vertex (nearest vertex of the unposed body, METHOD.md's I)."""
+    fit_distance: np.ndarray
+    """(N,) float32 distance [m] from each rest garment vertex to its associated body vertex."""
+    surface_distance: np.ndarray
+    """(N,) float32 distance [m] from each rest garment vertex to the unposed body surface."""
+    penetration: np.ndarray
+    """(T,) float32 fraction of garment vertices inside the posed body."""
+    max_stretch: np.ndarray
+    """(T,) float32 largest edge length ratio."""
+    digest: str
+    """The job digest the shard was made from."""
+    meta: dict
+    """JSON provenance: name, seed, config, engine versions, quality, job meta."""
+
+
+def _uniform_laplacian(faces: np.ndarray, n: int) -> sparse.csr_matrix:
+    """(N, N) row-normalised adjacency: ``A @ x`` is each vertex's neighbour mean."""
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    rows = np.concatenate([e[:, 0], e[:, 1]])
+    cols = np.concatenate([e[:, 1], e[:, 0]])
+    adj = sparse.csr_matrix((np.ones(rows.shape[0]), (rows, cols)), shape=(n, n))
+    deg = np.asarray(adj.sum(axis=1)).ravel()
+    return sparse.diags(1.0 / np.maximum(deg, 1.0)) @ adj
+
+
+def laplacian_smooth(positions: np.ndarray, faces: np.ndarray, *, iterations: int = 10,
+                     lam: float = 0.5) -> np.ndarray:
+    """Uniform Laplacian smoothing, ``x <- x + lam (mean(neighbours) - x)``, per frame.
+
+    Args:
+        positions: (T, N, 3) or (N, 3) vertices [m].
+        faces: (M, 3) int triangles.
+    Returns:
+        The smoothed vertices, same shape, float32 when the input is float32.
+    """
+    pos = np.asarray(positions)
+    single = pos.ndim == 2
+    x = (pos[None] if single else pos).astype(np.float64)
+    num_t, n = x.shape[:2]
+    avg = _uniform_laplacian(np.asarray(faces, dtype=np.int64), n)
+    flat = x.transpose(1, 0, 2).reshape(n, num_t * 3)  # all frames in one sparse product
+    for _ in range(iterations):
+        flat = flat + lam * (avg @ flat - flat)
+    out = flat.reshape(n, num_t, 3).transpose(1, 0, 2).astype(pos.dtype if pos.dtype == np.float32 else np.float64)
+    return out[0] if single else out
+
+
+def fit_inputs(body: BodyModel, betas: np.ndarray, garment_vertices: np.ndarray
+               ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The fit-attribute inputs of one garment-body pair (METHOD.md, rest pose).
+
+    Returns:
+        ``(assoc_vertex (N,) int64, fit_distance (N,) [m] to that body vertex,
+        surface_distance (N,) [m] to the body surface)``.
+    """
+    v_shaped, _ = shape_body(body, betas)
+    a = associate(garment_vertices, v_shaped, body.faces)
+    fit = np.linalg.norm(np.asarray(garment_vertices, dtype=np.float64) - v_shaped[a.vertex], axis=1)
+    return a.vertex, fit, a.distance
+
+
+# --------------------------------------------------------------------------- files
+
+
+def _atomic_write(path: Path, write: Callable[[object], None], suffix: str) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            write(fh)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+_ARRAY_KEYS = ("garment_vertices", "garment_faces", "positions", "coarse", "betas", "poses", "transl",
+               "assoc_vertex", "fit_distance", "surface_distance", "penetration", "max_stretch")
+
+
+def write_shard(path: str | Path, shard: Shard) -> Path:
+    """Write a shard atomically (temp file in the same folder, then rename)."""
+    path = Path(path)
+    arrays = {k: getattr(shard, k) for k in _ARRAY_KEYS}
+    arrays["digest"] = np.array(shard.digest)
+    arrays["meta_json"] = np.array(json.dumps(shard.meta, sort_keys=True))
+    arrays["format"] = np.array(SHARD_FORMAT)
+    _atomic_write(path, lambda fh: np.savez_compressed(fh, **arrays), ".npz.tmp")
+    return path
+
+
+def read_shard(path: str | Path) -> Shard:
+    """Read a shard; raises :class:`DatasetError` naming the file and the fault."""
+    path = Path(path)
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            missing = [k for k in _ARRAY_KEYS + ("digest", "meta_json", "format") if k not in data.files]
+            if missing:
+                raise DatasetError(f"{path}: not a cloth_usd shard, missing {', '.join(missing)}")
+            if int(data["format"]) != SHARD_FORMAT:
+                raise DatasetError(f"{path}: shard format {int(data['format'])}, this code reads {SHARD_FORMAT}")
+            arrays = {k: data[k] for k in _ARRAY_KEYS}
+            digest, meta = str(data["digest"]), json.loads(str(data["meta_json"]))
+    except DatasetError:
+        raise
+    except Exception as exc:  # OSError, zipfile.BadZipFile, ValueError from a truncated file
+        raise DatasetError(f"{path}: unreadable shard ({exc})") from exc
+    t, n = arrays["positions"].shape[:2]
+    if arrays["coarse"].shape != (t, n, 3) or arrays["garment_vertices"].shape != (n, 3) \
+            or arrays["poses"].shape != (t, 72):
+        raise DatasetError(f"{path}: inconsistent shapes (positions {arrays['positions'].shape}, "
+                           f"coarse {arrays['coarse'].shape}, poses {arrays['poses'].shape})")
+    return Shard(**arrays, digest=digest, meta=meta)
+
+
+def shard_is_valid(path: str | Path, digest: str | None = None) -> bool:
+    """Whether ``path`` is a readable shard (made from ``digest`` when given)."""
+    try:
+        shard = read_shard(path)
+    except DatasetError as exc:
+        log.info("%s", exc)
+        return False
+    return digest is None or shard.digest == digest
+
+
+@dataclass
+class Manifest:
+    """The JSON record of a data set folder."""
+
+    config: dict
+    """The SimConfig, as JSON."""
+    dataset: dict
+    """The DatasetConfig, as JSON."""
+    engine: dict
+    """Engine versions: newton, warp."""
+    sequences: dict = field(default_factory=dict)
+    """name -> {status: 'ok'|'rejected', seed, digest, shard, quality, meta}."""
+
+    @property
+    def rejected(self) -> list[str]:
+        return sorted(k for k, v in self.sequences.items() if v["status"] == "rejected")
+
+    @property
+    def accepted(self) -> list[str]:
+        return sorted(k for k, v in self.sequences.items() if v["status"] == "ok")
+
+    def to_json(self) -> dict:
+        return {"format": SHARD_FORMAT, "config": self.config, "dataset": self.dataset,
+                "engine": self.engine, "sequences": self.sequences, "rejected": self.rejected}
+
+    def write(self, folder: str | Path) -> Path:
+        """Write ``manifest.json`` atomically."""
+        path = Path(folder) / MANIFEST_NAME
+        text = json.dumps(self.to_json(), indent=2, sort_keys=True).encode()
+        _atomic_write(path, lambda fh: fh.write(text), ".json.tmp")
+        return path
+
+    @classmethod
+    def read(cls, folder: str | Path) -> "Manifest":
+        path = Path(folder) / MANIFEST_NAME
+        try:
+            raw = json.loads(path.read_text())
+            return cls(config=raw["config"], dataset=raw["dataset"], engine=raw["engine"],
+                       sequences=raw["sequences"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise DatasetError(f"{path}: unreadable manifest ({exc})") from exc
+
+
+# --------------------------------------------------------------------------- jobs
+
+
+def _check_name(name: str) -> None:
+    if not name or not all(c.isalnum() or c in "-_." for c in name) or name.startswith("."):
+        raise DatasetError(f"job name '{name}' must use letters, digits, '-', '_' and '.' only")
+
+
+def make_shard(job: Job, result: SimResult, body: BodyModel, config: SimConfig,
+               dataset: DatasetConfig, digest: str) -> Shard:
+    """Assemble a shard from a job and its (stable) simulation."""
+    assoc, fit, surf = fit_inputs(body, job.betas, job.garment_vertices)
+    coarse = laplacian_smooth(result.positions, job.garment_faces, iterations=dataset.coarse_iterations,
+                              lam=dataset.coarse_lambda)
+    meta = {"name": job.name, "seed": int(job.seed), "config": config.to_json(), "engine": engine_versions(),
+            "quality": result.quality(), "job": job.meta, "fps": config.fps}
+    return Shard(
+        garment_vertices=np.asarray(job.garment_vertices, dtype=np.float32),
+        garment_faces=np.asarray(job.garment_faces, dtype=np.int64),
+        positions=result.positions.astype(np.float32), coarse=coarse.astype(np.float32),
+        betas=np.asarray(job.betas, dtype=np.float64), poses=np.asarray(job.poses, dtype=np.float64),
+        transl=np.asarray(job.transl, dtype=np.float64), assoc_vertex=assoc.astype(np.int64),
+        fit_distance=fit.astype(np.float32), surface_distance=surf.astype(np.float32),
+        penetration=result.penetration.astype(np.float32), max_stretch=result.max_stretch.astype(np.float32),
+        digest=digest, meta=meta)
+
+
+def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimConfig(), *,
+             body: BodyModel | None = None, dataset: DatasetConfig = DatasetConfig(),
+             simulator: Callable[..., SimResult] = simulate) -> Manifest:
+    """Simulate every job into ``out_dir/<name>.npz``, resumably.
+
+    A job whose shard exists, reads back and carries the job's digest is skipped; so is
+    a job the manifest already lists as rejected with the same digest. Unstable
+    sequences are rejected: listed in the manifest with their quality, never written.
+    The manifest is rewritten atomically after every job.
+
+    Args:
+        simulator: the simulation function (tests substitute a fake).
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    body = body if body is not None else load_body_model()
+    try:
+        manifest = Manifest.read(out)
+    except DatasetError:
+        manifest = Manifest(config={}, dataset={}, engine={})
+    manifest.config, manifest.dataset, manifest.engine = config.to_json(), dict(dataset.__dict__), engine_versions()
+    for job in jobs:
+        _check_name(job.name)
+        digest = job.digest(config, dataset)
+        path = out / f"{job.name}.npz"
+        prior = manifest.sequences.get(job.name)
+        if prior and prior.get("digest") == digest and prior["status"] == "rejected":
+            log.info("%s: rejected before with the same inputs, skipped", job.name)
+            continue
+        if path.exists() and shard_is_valid(path, digest):
+            log.info("%s: shard exists, skipped", job.name)
+            if not prior or prior.get("digest") != digest:  # e.g. a manifest lost in a crash
+                shard = read_shard(path)
+                manifest.sequences[job.name] = {"status": "ok", "seed": int(job.seed), "digest": digest,
+                                                "shard": path.name, "quality": shard.meta.get("quality", {}),
+                                                "meta": job.meta}
+                manifest.write(out)
+            continue
+        result = simulator(body, job.betas, job.garment_vertices, job.garment_faces, job.poses, job.transl,
+                           config)
+        entry = {"seed": int(job.seed), "digest": digest, "quality": result.quality(), "meta": job.meta}
+        if result.is_stable:
+            write_shard(path, make_shard(job, result, body, config, dataset, digest))
+            entry.update(status="ok", shard=path.name)
+        else:
+            log.warning("%s: rejected (%s)", job.name, result.failure or "unstable")
+            path.unlink(missing_ok=True)  # a stale shard of older inputs must not survive
+            entry.update(status="rejected", shard=None)
+        manifest.sequences[job.name] = entry
+        manifest.write(out)
+    manifest.write(out)
+    return manifest

@@ -1,0 +1,466 @@
+"""Ground-truth cloth simulation: a garment worn by an animated SMPL body, with Newton's VBD.
+
+The garment is a VBD cloth; the body is a second cloth mesh of zero density (inverse
+mass 0, so kinematic) whose particle positions are prescribed every substep by a warp
+kernel that interpolates, on the device, between the posed body of two frames. Garment
+and body then meet through VBD's particle self-contact (vertex-triangle and edge-edge,
+with penetration-free truncation), the only contact model VBD has between two meshes.
+
+Newton and warp are imported lazily: ``import cloth_usd.datagen`` works without them,
+and :func:`simulate` raises :class:`SimulationError` naming what to install. Shape
+letters: T frames, N garment vertices, M garment triangles, V body vertices, C collider
+vertices.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import logging
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..core.association import associate
+from ..core.body import BodyModel, posed_vertices, shape_body
+from ..errors import ClothUsdError
+
+__all__ = [
+    "SimConfig",
+    "SimResult",
+    "SimulationError",
+    "Collider",
+    "make_collider",
+    "simulate",
+    "penetration_fraction",
+    "edge_stretch",
+    "engine_versions",
+    "resolve_device",
+]
+
+log = logging.getLogger(__name__)
+
+
+class SimulationError(ClothUsdError):
+    """The simulator is missing, or a simulation input is malformed."""
+
+
+@dataclass(frozen=True)
+class SimConfig:
+    """One material and one solver setting for a whole data set (SI units, Y up)."""
+
+    fps: float = 24.0
+    """Output frames per second; the motion is sampled at this rate."""
+    substeps: int = 10
+    """Solver steps per output frame."""
+    iterations: int = 10
+    """VBD iterations per solver step."""
+    density: float = 0.15
+    """Cloth mass per area [kg/m^2] (a cotton T-shirt is about 0.15)."""
+    stretch_stiffness: float = 5.0e3
+    """Membrane stiffness [N/m]: VBD's ``tri_ke`` and ``tri_ka``."""
+    bend_stiffness: float = 5.0e-5
+    """Dihedral bending stiffness: VBD's ``edge_ke`` (scaled by edge rest length)."""
+    stretch_damping: float = 1.0e-4
+    """Rayleigh damping of the membrane [s]: VBD's ``tri_kd``."""
+    bend_damping: float = 1.0e-6
+    """Damping of the bending: VBD's ``edge_kd``."""
+    friction: float = 0.3
+    """Coulomb friction of cloth-body and cloth-cloth contact (``soft_contact_mu``)."""
+    contact_stiffness: float = 1.0e4
+    """Contact stiffness [N/m] (``soft_contact_ke``)."""
+    contact_damping: float = 1.0e-3
+    """Contact damping [N s/m] (``soft_contact_kd``)."""
+    contact_margin: float = 4.0e-3
+    """Distance [m] at which cloth-body and cloth-cloth pairs start to repel."""
+    contact_gap: float = 3.0e-3
+    """Extra detection distance [m] beyond the margin (VBD ``particle_self_contact_gap``)."""
+    particle_radius: float = 3.0e-3
+    """Particle radius [m] for particle-shape contact (unused without rigid shapes)."""
+    self_contact: bool = True
+    """Resolve contact; False leaves the body without effect (the garment falls)."""
+    collider_faces: int | None = 6000
+    """Decimate the body collider to about this many triangles (needs fast-simplification);
+    None uses the full body mesh."""
+    gravity: float = 9.81
+    """Gravity [m/s^2] along -Y."""
+    max_speed: float = 10.0
+    """A garment vertex moving faster than this [m/s] between frames marks the frame unstable."""
+    max_stretch: float = 1.6
+    """An edge longer than this many times its rest length marks the frame unstable."""
+    device: str = "auto"
+    """Warp device: "auto" (CUDA when present, else CPU), "cpu", "cuda", "cuda:1", ..."""
+    graph_capture: bool = True
+    """Replay each frame's substeps as a CUDA graph (CUDA only, even ``substeps`` only)."""
+
+    def __post_init__(self) -> None:
+        for name in ("fps", "substeps", "iterations", "gravity", "max_speed"):
+            if not getattr(self, name) >= 0 or (name in ("fps", "substeps", "iterations")
+                                                 and getattr(self, name) <= 0):
+                raise SimulationError(f"SimConfig.{name} must be positive, got {getattr(self, name)}")
+        if self.max_stretch <= 1.0:
+            raise SimulationError(f"SimConfig.max_stretch must exceed 1, got {self.max_stretch}")
+        if self.collider_faces is not None and self.collider_faces < 100:
+            raise SimulationError(f"SimConfig.collider_faces must be None or >= 100, got {self.collider_faces}")
+
+    def to_json(self) -> dict:
+        """Plain JSON-able fields (for manifests and shards)."""
+        return dataclasses.asdict(self)
+
+
+@dataclass(frozen=True)
+class SimResult:
+    """A simulated sequence and its per-frame quality figures.
+
+    A sequence that goes unstable stops at the first bad frame: every per-frame array
+    then has ``T' = frames_done <= T`` rows, the last one being the bad frame.
+    """
+
+    positions: np.ndarray
+    """(T', N, 3) float32 garment vertices [m], world (SMPL) frame; frame 0 is the rest garment."""
+    nan: np.ndarray
+    """(T',) bool: a frame holds a NaN or Inf position."""
+    penetration: np.ndarray
+    """(T',) float64 fraction of garment vertices inside the posed body (full SMPL mesh)."""
+    max_stretch: np.ndarray
+    """(T',) float64 largest edge length over its rest length."""
+    max_speed: np.ndarray
+    """(T',) float64 fastest garment vertex [m/s] since the previous frame (0 at frame 0)."""
+    stable: np.ndarray
+    """(T',) bool: finite, no vertex faster than ``SimConfig.max_speed``, stretch below ``SimConfig.max_stretch``."""
+    frames_requested: int
+    """T, the number of frames asked for."""
+    failure: str
+    """Why the sequence stopped early ('' when it completed)."""
+    device: str
+    """The warp device it ran on."""
+    seconds_per_frame: float
+    """Mean wall time per simulated frame after frame 1 (frame 1 includes kernel loading)."""
+
+    @property
+    def frames_done(self) -> int:
+        return int(self.positions.shape[0])
+
+    @property
+    def is_stable(self) -> bool:
+        """Every frame was simulated and every frame is stable."""
+        return self.frames_done == self.frames_requested and bool(np.all(self.stable))
+
+    def quality(self) -> dict:
+        """Summary figures (JSON-able) for manifests."""
+        return {
+            "frames_requested": self.frames_requested,
+            "frames_done": self.frames_done,
+            "stable": self.is_stable,
+            "failure": self.failure,
+            "any_nan": bool(np.any(self.nan)),
+            "penetration_max": float(np.nanmax(self.penetration)) if self.frames_done else 0.0,
+            "penetration_mean": float(np.nanmean(self.penetration)) if self.frames_done else 0.0,
+            "max_stretch": float(np.nanmax(self.max_stretch)) if self.frames_done else 0.0,
+            "max_speed": float(np.nanmax(self.max_speed)) if self.frames_done else 0.0,
+            "device": self.device,
+            "seconds_per_frame": self.seconds_per_frame,
+        }
+
+
+@dataclass(frozen=True)
+class Collider:
+    """A (possibly decimated) body surface bound to the full body by barycentric coordinates."""
+
+    faces: np.ndarray
+    """(F', 3) int64 collider triangles."""
+    triangle: np.ndarray
+    """(C,) int64 full-body triangle each collider vertex lies on."""
+    barycentric: np.ndarray
+    """(C, 3) float64 its barycentric coordinates there."""
+
+    def pose(self, body_vertices: np.ndarray, body_faces: np.ndarray) -> np.ndarray:
+        """Collider vertices from full-body vertices.
+
+        Args:
+            body_vertices: (T, V, 3) posed full body [m].
+        Returns:
+            (T, C, 3) float64 [m].
+        """
+        corners = body_vertices[:, body_faces[self.triangle]]  # (T, C, 3, 3)
+        return np.einsum("ck,tckd->tcd", self.barycentric, corners)
+
+
+# --------------------------------------------------------------------------- engine
+
+
+def _import_engine():
+    try:
+        import newton
+        import warp as wp
+    except ImportError as exc:
+        raise SimulationError(
+            f"cloth simulation needs Newton and warp ({exc}); install them with "
+            "`pip install newton==1.8.0` (it brings warp-lang)") from exc
+    return newton, wp
+
+
+def engine_versions() -> dict[str, str]:
+    """Versions of the simulation engine, for manifests ('' for a missing package)."""
+    out = {}
+    for name, module in (("newton", "newton"), ("warp", "warp")):
+        try:
+            out[name] = str(__import__(module).__version__)
+        except ImportError:
+            out[name] = ""
+    return out
+
+
+def resolve_device(name: str = "auto") -> str:
+    """The warp device to use: "auto" picks CUDA when a GPU is present, else the CPU."""
+    _, wp = _import_engine()
+    if name == "auto":
+        return "cuda:0" if wp.get_cuda_device_count() > 0 else "cpu"
+    try:
+        return str(wp.get_device(name))
+    except Exception as exc:  # warp raises plain RuntimeError/ValueError for unknown names
+        raise SimulationError(f"unknown warp device '{name}' (valid: auto, cpu, cuda, cuda:<n>): {exc}") from exc
+
+
+@functools.lru_cache(maxsize=1)
+def _kernels():
+    """The warp kernels, built on first use (so importing this module needs no warp)."""
+    _, wp = _import_engine()
+
+    @wp.kernel
+    def place_collider(frame_a: wp.array(dtype=wp.vec3), frame_b: wp.array(dtype=wp.vec3),
+                       alpha: float, offset: int, inv_dt: float,
+                       q: wp.array(dtype=wp.vec3), qd: wp.array(dtype=wp.vec3)):
+        i = wp.tid()
+        p = frame_a[i] * (1.0 - alpha) + frame_b[i] * alpha
+        qd[offset + i] = (p - q[offset + i]) * inv_dt
+        q[offset + i] = p
+
+    return place_collider
+
+
+# --------------------------------------------------------------------------- geometry
+
+
+def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    """(V, 3) area-weighted unit vertex normals of one mesh."""
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    n = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(n, f[:, k], fn)
+    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
+
+
+def penetration_fraction(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray,
+                         *, tolerance: float = 0.0) -> float:
+    """Fraction of points inside a closed body: behind the body's closest surface point.
+
+    The side is the sign of ``(p - closest) . n`` with ``n`` the interpolated vertex
+    normal at the closest point.
+
+    Args:
+        points: (N, 3) garment vertices [m].
+        body_vertices: (V, 3) posed body [m].
+        body_faces: (F, 3) body triangles.
+        tolerance: depth [m] a point must be behind the surface to count.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    if points.shape[0] == 0 or not np.all(np.isfinite(points)):
+        return float("nan")
+    a = associate(points, body_vertices, body_faces)
+    corners = body_faces[a.triangle]
+    closest = np.einsum("nk,nkc->nc", a.barycentric, body_vertices[corners])
+    normal = np.einsum("nk,nkc->nc", a.barycentric, _vertex_normals(body_vertices, body_faces)[corners])
+    side = np.einsum("nc,nc->n", points - closest, normal)
+    return float(np.mean(side < -tolerance))
+
+
+def unique_edges(faces: np.ndarray) -> np.ndarray:
+    """(E', 2) int64 undirected edges of a triangle mesh, each once."""
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    return np.unique(np.sort(e, axis=1), axis=0).astype(np.int64)
+
+
+def edge_stretch(positions: np.ndarray, rest: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Largest edge length ratio (current / rest) per frame.
+
+    Args:
+        positions: (T, N, 3) [m].
+        rest: (N, 3) [m].
+        edges: (E', 2) int.
+    Returns:
+        (T,) float64.
+    """
+    rest_len = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1)
+    cur = np.linalg.norm(positions[:, edges[:, 1]] - positions[:, edges[:, 0]], axis=2)
+    with np.errstate(invalid="ignore"):
+        ratio = cur / np.maximum(rest_len, 1e-12)
+    return np.max(np.where(np.isfinite(ratio), ratio, np.inf), axis=1)
+
+
+def make_collider(body: BodyModel, betas: np.ndarray, faces: int | None) -> Collider:
+    """The body collider: the full mesh, or a quadric decimation of the shaped rest body.
+
+    Decimated vertices are bound to the nearest point of the full rest body, so the
+    collider follows the posed body exactly through the same skinning.
+    """
+    v_shaped, _ = shape_body(body, betas)
+    if faces is None or faces >= body.faces.shape[0]:
+        # Each vertex as a corner of its first incident triangle.
+        flat = body.faces.ravel()
+        face_of = np.repeat(np.arange(body.faces.shape[0]), 3)
+        corner = np.tile(np.arange(3), body.faces.shape[0])
+        verts, first = np.unique(flat, return_index=True)
+        tri = np.zeros(v_shaped.shape[0], dtype=np.int64)
+        bary = np.zeros((v_shaped.shape[0], 3))
+        tri[verts] = face_of[first]
+        bary[verts, corner[first]] = 1.0
+        return Collider(faces=body.faces.astype(np.int64), triangle=tri, barycentric=bary)
+    try:
+        import fast_simplification  # noqa: F401  (trimesh's quadric decimation backend)
+        import trimesh
+    except ImportError as exc:
+        raise SimulationError(
+            f"SimConfig.collider_faces={faces} needs trimesh and fast-simplification ({exc}); "
+            "`pip install trimesh fast-simplification`, or set collider_faces=None for the full body") from exc
+    mesh = trimesh.Trimesh(v_shaped, body.faces, process=False)
+    coarse = mesh.simplify_quadric_decimation(face_count=int(faces))
+    cv, cf = np.asarray(coarse.vertices), np.asarray(coarse.faces, dtype=np.int64)
+    a = associate(cv, v_shaped, body.faces)
+    return Collider(faces=cf, triangle=a.triangle, barycentric=a.barycentric)
+
+
+# --------------------------------------------------------------------------- simulation
+
+
+def _check_inputs(garment_verts, garment_faces, poses, transl):
+    garment_verts = np.asarray(garment_verts, dtype=np.float64)
+    garment_faces = np.asarray(garment_faces, dtype=np.int64)
+    poses = np.asarray(poses, dtype=np.float64)
+    if garment_verts.ndim != 2 or garment_verts.shape[1] != 3 or not np.all(np.isfinite(garment_verts)):
+        raise SimulationError(f"garment_verts must be finite (N, 3), got shape {garment_verts.shape}")
+    if garment_faces.ndim != 2 or garment_faces.shape[1] != 3 or garment_faces.size == 0 \
+            or garment_faces.min() < 0 or garment_faces.max() >= garment_verts.shape[0]:
+        raise SimulationError(f"garment_faces must be (M, 3) indices below {garment_verts.shape[0]}")
+    if poses.ndim != 2 or poses.shape[1] != 72 or poses.shape[0] < 1:
+        raise SimulationError(f"poses must be (T, 72) axis-angle, got shape {poses.shape}")
+    transl = np.zeros((poses.shape[0], 3)) if transl is None else np.asarray(transl, dtype=np.float64)
+    if transl.shape != (poses.shape[0], 3):
+        raise SimulationError(f"transl must be (T, 3) = ({poses.shape[0]}, 3), got {transl.shape}")
+    return garment_verts, garment_faces, poses, transl
+
+
+def simulate(body: BodyModel, betas: np.ndarray, garment_verts: np.ndarray, garment_faces: np.ndarray,
+             poses: np.ndarray, transl: np.ndarray | None = None,
+             config: SimConfig = SimConfig()) -> SimResult:
+    """Simulate a garment worn by an animated body.
+
+    Args:
+        body: the SMPL body model.
+        betas: (B',) shape coefficients.
+        garment_verts: (N, 3) rest garment [m], canonical body frame, worn by the body in
+            the rest pose (frame 0 of the motion must be the rest pose at ``transl[0]``).
+        garment_faces: (M, 3) int triangles.
+        poses: (T, 72) axis-angle [rad].
+        transl: (T, 3) root translation [m], or None for zero.
+        config: solver and material.
+    Returns:
+        A :class:`SimResult`; it stops at the first unstable frame.
+    """
+    newton, wp = _import_engine()
+    garment_verts, garment_faces, poses, transl = _check_inputs(garment_verts, garment_faces, poses, transl)
+    device = resolve_device(config.device)
+    num_t, num_n = poses.shape[0], garment_verts.shape[0]
+
+    body_full = posed_vertices(body, betas, poses, transl)  # (T, V, 3)
+    collider = make_collider(body, betas, config.collider_faces)
+    body_col = collider.pose(body_full, body.faces).astype(np.float32)  # (T, C, 3)
+    rest = garment_verts + transl[0]
+    rest32 = rest.astype(np.float32)
+    edges = unique_edges(garment_faces)
+
+    builder = newton.ModelBuilder(up_axis=newton.Axis.Y, gravity=(0.0, -config.gravity, 0.0))
+    common = dict(pos=wp.vec3(0.0, 0.0, 0.0), rot=wp.quat_identity(), scale=1.0, vel=wp.vec3(0.0, 0.0, 0.0),
+                  tri_ke=config.stretch_stiffness, tri_ka=config.stretch_stiffness,
+                  tri_kd=config.stretch_damping, edge_ke=config.bend_stiffness, edge_kd=config.bend_damping,
+                  particle_radius=config.particle_radius)
+    builder.add_cloth_mesh(vertices=[wp.vec3(*p) for p in rest32], indices=garment_faces.ravel().tolist(),
+                           density=config.density, label="garment", **common)
+    builder.add_cloth_mesh(vertices=[wp.vec3(*p) for p in body_col[0]], indices=collider.faces.ravel().tolist(),
+                           density=0.0, label="body", **common)
+    builder.color(include_bending=True)
+    model = builder.finalize(device=device)
+    model.soft_contact_ke = config.contact_stiffness
+    model.soft_contact_kd = config.contact_damping
+    model.soft_contact_mu = config.friction
+    solver = newton.solvers.SolverVBD(
+        model, iterations=config.iterations,
+        particle_enable_self_contact=config.self_contact,
+        particle_self_contact_margin=config.contact_margin,
+        particle_self_contact_gap=config.contact_gap)
+    states = [model.state(), model.state()]
+    control = model.control()
+
+    place = _kernels()
+    frames_dev = wp.array(body_col, dtype=wp.vec3, device=device)  # (T, C, 3) on the device
+    frame_a = wp.empty(body_col.shape[1], dtype=wp.vec3, device=device)
+    frame_b = wp.empty(body_col.shape[1], dtype=wp.vec3, device=device)
+    dt = 1.0 / (config.fps * config.substeps)
+
+    def one_frame():
+        for s in range(config.substeps):
+            state_in, state_out = states
+            wp.launch(place, dim=body_col.shape[1],
+                      inputs=[frame_a, frame_b, float(s + 1) / config.substeps, num_n, 1.0 / dt],
+                      outputs=[state_in.particle_q, state_in.particle_qd], device=device)
+            state_in.clear_forces()
+            solver.step(state_in, state_out, control, None, dt)
+            states.reverse()
+
+    use_graph = (config.graph_capture and wp.get_device(device).is_cuda and config.substeps % 2 == 0
+                 and num_t > 1)
+    graph = None
+
+    positions = [rest32]
+    nan, stable, speed = [False], [True], [0.0]
+    failure = ""
+    max_move = config.max_speed / config.fps
+    times = []
+    for t in range(1, num_t):
+        start = time.perf_counter()
+        wp.copy(frame_a, frames_dev[t - 1])
+        wp.copy(frame_b, frames_dev[t])
+        if use_graph and graph is None and t > 1:  # frame 1 runs eagerly (allocations, kernel loads)
+            with wp.ScopedCapture(device=device) as capture:
+                one_frame()
+            graph = capture.graph
+        if graph is not None:
+            wp.capture_launch(graph)
+        else:
+            one_frame()
+        q = states[0].particle_q.numpy()[:num_n].astype(np.float32)  # one sync per frame
+        times.append(time.perf_counter() - start)
+        positions.append(q)
+        finite = bool(np.all(np.isfinite(q)))
+        move = float(np.max(np.linalg.norm(q.astype(np.float64) - positions[-2], axis=1))) if finite else np.inf
+        stretch = float(edge_stretch(q[None].astype(np.float64), rest, edges)[0]) if finite else np.inf
+        nan.append(not finite)
+        speed.append(move * config.fps)
+        ok = finite and move <= max_move and stretch <= config.max_stretch
+        stable.append(ok)
+        if not ok:
+            failure = (f"frame {t}: " + ("NaN/Inf positions" if not finite else
+                       f"vertex speed {move * config.fps:.3g} m/s > {config.max_speed}" if move > max_move else
+                       f"edge stretch {stretch:.3g} > {config.max_stretch}"))
+            log.warning("simulation unstable, stopping: %s", failure)
+            break
+        log.debug("frame %d/%d: %.3f s", t, num_t - 1, times[-1])
+
+    pos = np.stack(positions).astype(np.float32)
+    stretch_all = edge_stretch(pos.astype(np.float64), rest, edges)
+    pen = np.array([penetration_fraction(pos[t], body_full[t], body.faces) for t in range(pos.shape[0])])
+    spf = float(np.mean(times[1:])) if len(times) > 1 else (float(times[0]) if times else 0.0)
+    return SimResult(positions=pos, nan=np.asarray(nan), penetration=pen, max_stretch=stretch_all,
+                     max_speed=np.asarray(speed, dtype=np.float64), stable=np.asarray(stable),
+                     frames_requested=num_t, failure=failure, device=device, seconds_per_frame=spf)

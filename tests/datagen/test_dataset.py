@@ -1,0 +1,135 @@
+"""Dataset shards: round trip, resume, rejection, Laplacian coarse target (no simulator needed)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cloth_usd.core.body import load_body_model
+from cloth_usd.datagen.dataset import (DatasetConfig, DatasetError, Job, Manifest, fit_inputs, laplacian_smooth,
+                                       read_shard, run_jobs, write_shard)
+from cloth_usd.datagen.simulate import SimConfig, SimResult
+
+
+def _grid(n: int = 8):
+    """(n*n, 3) bumpy grid and its triangles."""
+    xs, ys = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n), indexing="ij")
+    z = 0.05 * np.sin(9 * xs) * np.cos(7 * ys)
+    v = np.stack([xs, ys, z], axis=-1).reshape(-1, 3)
+    idx = np.arange(n * n).reshape(n, n)
+    a, b, c, d = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[:-1, 1:].ravel(), idx[1:, 1:].ravel()
+    return v, np.concatenate([np.stack([a, b, d], 1), np.stack([a, d, c], 1)])
+
+
+def _lap_norm(pos, faces):
+    n = pos.shape[-2]
+    nb = [[] for _ in range(n)]
+    for f in faces:
+        for i in range(3):
+            nb[f[i]] += [f[(i + 1) % 3], f[(i + 2) % 3]]
+    mean = np.stack([pos[..., sorted(set(nb[i])), :].mean(axis=-2) for i in range(n)], axis=-2)
+    return np.linalg.norm(mean - pos, axis=-1).mean()
+
+
+def test_laplacian_coarse_target_is_smoother_and_same_shape():
+    v, f = _grid()
+    pos = np.stack([v, v + 0.01]).astype(np.float32)
+    out = laplacian_smooth(pos, f, iterations=5)
+    assert out.shape == pos.shape and out.dtype == np.float32
+    assert _lap_norm(out, f) < 0.5 * _lap_norm(pos, f)
+    np.testing.assert_allclose(laplacian_smooth(pos, f, iterations=0), pos)
+    np.testing.assert_allclose(laplacian_smooth(pos[1], f, iterations=5), out[1], atol=1e-6)  # per frame
+
+
+class FakeSim:
+    """Stands in for the simulator: the rest garment, dropping 1 mm a frame; counts calls."""
+
+    def __init__(self, unstable=()):
+        self.calls, self.unstable = [], set(unstable)
+
+    def __call__(self, body, betas, verts, faces, poses, transl, config):
+        self.calls.append(verts.shape[0])
+        t = poses.shape[0]
+        pos = (verts[None] + transl[:, None] - np.arange(t)[:, None, None] * [0, 1e-3, 0]).astype(np.float32)
+        bad = verts.shape[0] in self.unstable
+        done = 2 if bad else t
+        stable = np.ones(done, bool)
+        if bad:
+            stable[-1] = False
+        return SimResult(positions=pos[:done], nan=np.zeros(done, bool), penetration=np.zeros(done),
+                         max_stretch=np.ones(done), max_speed=np.zeros(done), stable=stable,
+                         frames_requested=t, failure="frame 1: NaN/Inf positions" if bad else "",
+                         device="cpu", seconds_per_frame=0.0)
+
+
+@pytest.fixture(scope="module")
+def body():
+    return load_body_model()
+
+
+def _jobs(body):
+    from cloth_usd.core.body import shape_body
+
+    v_shaped, _ = shape_body(body, np.zeros(10))
+    out = []
+    for k, n in enumerate((40, 50, 60)):
+        verts = v_shaped[: n] * 1.01
+        faces = np.stack([np.arange(n - 2), np.arange(1, n - 1), np.arange(2, n)], axis=1)
+        out.append(Job(name=f"job{k}", garment_vertices=verts, garment_faces=faces, betas=np.zeros(10),
+                       poses=np.zeros((4, 72)), transl=np.zeros((4, 3)), seed=k, meta={"n": n}))
+    return out
+
+
+def test_run_jobs_round_trip_reject_and_resume(tmp_path, body):
+    jobs, sim = _jobs(body), FakeSim(unstable={50})
+    cfg = SimConfig(substeps=2)
+    manifest = run_jobs(jobs, tmp_path, cfg, body=body, simulator=sim)
+    assert sim.calls == [40, 50, 60]
+    assert manifest.accepted == ["job0", "job2"] and manifest.rejected == ["job1"]
+    assert not (tmp_path / "job1.npz").exists()  # rejected: listed, never written
+    raw = json.loads((tmp_path / "manifest.json").read_text())
+    assert raw["rejected"] == ["job1"] and raw["config"]["substeps"] == 2
+    assert set(raw["engine"]) == {"newton", "warp"}
+    assert raw["sequences"]["job0"]["seed"] == 0
+    assert raw["sequences"]["job1"]["quality"]["failure"].startswith("frame 1")
+
+    shard = read_shard(tmp_path / "job0.npz")
+    assert shard.positions.shape == (4, 40, 3) and shard.positions.dtype == np.float32
+    assert shard.coarse.shape == shard.positions.shape
+    np.testing.assert_allclose(shard.garment_vertices, jobs[0].garment_vertices, atol=1e-6)
+    assoc, fit, surf = fit_inputs(body, np.zeros(10), jobs[0].garment_vertices)
+    np.testing.assert_array_equal(shard.assoc_vertex, assoc)
+    np.testing.assert_allclose(shard.fit_distance, fit, atol=1e-6)
+    assert np.all(surf <= fit + 1e-9)  # the surface is never farther than a vertex on it
+    assert shard.meta["seed"] == 0 and shard.meta["quality"]["stable"] is True
+
+    again = FakeSim(unstable={50})
+    run_jobs(jobs, tmp_path, cfg, body=body, simulator=again)
+    assert again.calls == []  # everything valid or known-rejected: nothing re-simulated
+
+    (tmp_path / "job2.npz").write_bytes(b"truncated")  # a corrupt shard is redone
+    third = FakeSim()
+    run_jobs(jobs, tmp_path, cfg, body=body, simulator=third)
+    assert third.calls == [60]
+    changed = FakeSim()
+    run_jobs(jobs[:1], tmp_path, SimConfig(substeps=3), body=body, simulator=changed)
+    assert changed.calls == [40]  # a new config invalidates the shard
+
+
+def test_write_shard_is_atomic_and_read_rejects_junk(tmp_path, body):
+    sim = FakeSim()
+    run_jobs(_jobs(body)[:1], tmp_path, SimConfig(), body=body, simulator=sim)
+    shard = read_shard(tmp_path / "job0.npz")
+    write_shard(tmp_path / "copy.npz", shard)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["copy.npz", "job0.npz", "manifest.json"]
+    assert read_shard(tmp_path / "copy.npz").digest == shard.digest
+    np.savez(tmp_path / "junk.npz", a=np.zeros(3))
+    with pytest.raises(DatasetError, match="missing"):
+        read_shard(tmp_path / "junk.npz")
+    with pytest.raises(DatasetError, match="unreadable"):
+        read_shard(tmp_path / "nope.npz")
+    with pytest.raises(DatasetError, match="coarse_lambda"):
+        DatasetConfig(coarse_lambda=0.0)
+    assert Manifest.read(tmp_path).accepted == ["job0"]
