@@ -1,8 +1,14 @@
 #!/usr/bin/env bash
-# Install what the tests need (same environment as scripts/setup.sh) and run them.
+# Install what the tests need and run them all: the main suite in .venv, then the Blender
+# add-on tests in real Blender (bpy) in .venv-blender (bpy pins numpy 1.26 and ships its
+# own USD, so it cannot share .venv). This is what CI runs.
 # Usage: bash scripts/test.sh [pytest args]
+#        CLOTH_USD_SKIP_BLENDER=1 bash scripts/test.sh   # skip the add-on tests locally
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${VENV:-.venv}
 bash scripts/setup.sh --no-sample
-exec "$VENV/bin/python" -m pytest "$@"
+"$VENV/bin/python" -m pytest "$@"
+if [ "${CLOTH_USD_SKIP_BLENDER:-0}" != "1" ]; then
+    bash scripts/test_addon.sh
+fi
