@@ -277,16 +277,16 @@ class Manifest:
         return {"format": SHARD_FORMAT, "config": self.config, "dataset": self.dataset,
                 "engine": self.engine, "sequences": self.sequences, "rejected": self.rejected}
 
-    def write(self, folder: str | Path) -> Path:
-        """Write ``manifest.json`` atomically."""
-        path = Path(folder) / MANIFEST_NAME
+    def write(self, folder: str | Path, name: str = MANIFEST_NAME) -> Path:
+        """Write ``manifest.json`` (or ``name``: a worker's own) atomically."""
+        path = Path(folder) / name
         text = json.dumps(self.to_json(), indent=2, sort_keys=True).encode()
         _atomic_write(path, lambda fh: fh.write(text), ".json.tmp")
         return path
 
     @classmethod
-    def read(cls, folder: str | Path) -> "Manifest":
-        path = Path(folder) / MANIFEST_NAME
+    def read(cls, folder: str | Path, name: str = MANIFEST_NAME) -> "Manifest":
+        path = Path(folder) / name
         try:
             raw = json.loads(path.read_text())
             return cls(config=raw["config"], dataset=raw["dataset"], engine=raw["engine"],
@@ -324,7 +324,8 @@ def make_shard(job: Job, result: SimResult, body: BodyModel, config: SimConfig,
 
 def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimConfig(), *,
              body: BodyModel | None = None, dataset: DatasetConfig = DatasetConfig(),
-             simulator: Callable[..., SimResult] = simulate) -> Manifest:
+             simulator: Callable[..., SimResult] = simulate,
+             manifest_name: str = MANIFEST_NAME) -> Manifest:
     """Simulate every job into ``out_dir/<name>.npz``, resumably.
 
     A job whose shard exists, reads back and carries the job's digest is skipped; so is
@@ -334,12 +335,14 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
 
     Args:
         simulator: the simulation function (tests substitute a fake).
+        manifest_name: the manifest file; parallel workers each keep their own and the
+            caller merges them (shards are shared: their digests make resume safe).
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     body = body if body is not None else load_body_model()
     try:
-        manifest = Manifest.read(out)
+        manifest = Manifest.read(out, manifest_name)
     except DatasetError:
         manifest = Manifest(config={}, dataset={}, engine={})
     manifest.config, manifest.dataset, manifest.engine = config.to_json(), dict(dataset.__dict__), engine_versions()
@@ -358,7 +361,7 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
                 manifest.sequences[job.name] = {"status": "ok", "seed": int(job.seed), "digest": digest,
                                                 "shard": path.name, "quality": shard.meta.get("quality", {}),
                                                 "meta": job.meta}
-                manifest.write(out)
+                manifest.write(out, manifest_name)
             continue
         result = simulator(body, job.betas, job.garment_vertices, job.garment_faces, job.poses, job.transl,
                            config)
@@ -371,6 +374,6 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
             path.unlink(missing_ok=True)  # a stale shard of older inputs must not survive
             entry.update(status="rejected", shard=None)
         manifest.sequences[job.name] = entry
-        manifest.write(out)
-    manifest.write(out)
+        manifest.write(out, manifest_name)
+    manifest.write(out, manifest_name)
     return manifest

@@ -1,0 +1,201 @@
+"""The ground-truth factory: garments x bodies x motions, simulated, from one config.
+
+Splits follow the paper: training shirts on training bodies with training motions;
+new bodies (training shirts on test bodies), new garments (test shirts on training
+bodies) and new motions (training pairs with test motions) for testing; a small
+validation set from both sides. The fit attribute's factor analysis is fitted on the
+training pairs and saved beside the shards (``fit.npz``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import tomllib
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from ..core.association import associate
+from ..core.body import load_body_model, shape_body
+from ..core.fit import FitModel, fit_factor_analysis, pair_distances, select_anchors
+from ..errors import ArgumentError
+from .bodies import body_shapes
+from .dataset import MANIFEST_NAME, DatasetConfig, Job, Manifest, run_jobs
+from .motion import MotionKind, MotionSpec, generate
+from .tshirt import make_tshirt, tshirt_variants
+
+__all__ = ["FactoryConfig", "load_config", "plan_jobs", "run_factory"]
+
+log = logging.getLogger(__name__)
+
+_DEFAULT_TRAIN_MOTIONS = tuple({"kind": k, "seconds": 4.0, "seed": i} for i, k in enumerate(
+    ("walk", "run", "arm_raise", "arm_swing", "torso_twist", "torso_bend", "dance")))
+_DEFAULT_TEST_MOTIONS = ({"kind": "dance", "seconds": 4.0, "seed": 100},
+                         {"kind": "walk", "seconds": 4.0, "seed": 101})
+
+
+@dataclass(frozen=True)
+class FactoryConfig:
+    """A whole data set; the defaults are the paper's split at full scale."""
+
+    seed: int = 0
+    """Draws the T-shirt variants beyond the three fixed extremes."""
+    shirts: int = 9
+    test_shirts: tuple[int, ...] = (0, 1, 8)
+    """Variant indices held out: 0 is the short shirt, 1 the long one, 8 a drawn one; the
+    other six on eight bodies make the paper's 48 training pairs."""
+    bodies: tuple[str, ...] = tuple(s.name for s in body_shapes())
+    test_bodies: tuple[str, ...] = ("medium_thin", "medium_regular", "medium_fat")
+    train_motions: tuple[dict, ...] = _DEFAULT_TRAIN_MOTIONS
+    """MotionSpec fields per motion."""
+    test_motions: tuple[dict, ...] = _DEFAULT_TEST_MOTIONS
+    garment_vertices: int | None = None
+    """Override every shirt's target vertex count (small data sets, tests)."""
+    sim: dict = field(default_factory=dict)
+    """SimConfig field overrides."""
+    dataset: dict = field(default_factory=dict)
+    """DatasetConfig field overrides."""
+    max_frames: int | None = None
+    """Cut every motion to this many frames (tests)."""
+
+
+def load_config(path: str | Path) -> FactoryConfig:
+    """A FactoryConfig from ``.json`` or ``.toml``; unknown keys are an error naming them."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+        raw = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+    except OSError as exc:
+        raise ArgumentError(f"{path}: cannot read the data set config ({exc.strerror})") from exc
+    except (ValueError, tomllib.TOMLDecodeError) as exc:
+        raise ArgumentError(f"{path}: not valid {path.suffix[1:] or 'JSON'} ({exc})") from exc
+    known = {f.name for f in dataclasses.fields(FactoryConfig)}
+    unknown = sorted(set(raw) - known)
+    if unknown:
+        raise ArgumentError(f"{path}: unknown keys {unknown} (valid: {', '.join(sorted(known))})")
+    for key in ("test_shirts", "bodies", "test_bodies", "train_motions", "test_motions"):
+        if key in raw:
+            raw[key] = tuple(raw[key])
+    return FactoryConfig(**raw)
+
+
+def _motion(fields: dict, max_frames: int | None) -> tuple[str, np.ndarray, np.ndarray]:
+    spec = MotionSpec(**fields)
+    poses, root = generate(spec)
+    if max_frames:
+        poses, root = poses[:max_frames], root[:max_frames]
+    return f"{MotionKind(spec.kind).value}-s{spec.seed}", poses, root
+
+
+def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
+    """Every sequence of the data set, each tagged with its split in ``meta``."""
+    body = body if body is not None else load_body_model()
+    variants = tshirt_variants(config.shirts, seed=config.seed)
+    if config.garment_vertices:
+        variants = [dataclasses.replace(v, target_vertices=config.garment_vertices) for v in variants]
+    bad = [i for i in config.test_shirts if not 0 <= i < len(variants)]
+    if bad:
+        raise ArgumentError(f"test_shirts {bad}: out of range for {len(variants)} shirts")
+    shapes = {s.name: s for s in body_shapes(list(config.bodies))}
+    body_shapes(list(config.test_bodies))  # validates the names
+    train_shirts = [i for i in range(len(variants)) if i not in config.test_shirts]
+    train_bodies = [n for n in config.bodies if n not in config.test_bodies]
+    train_m = [_motion(m, config.max_frames) for m in config.train_motions]
+    test_m = [_motion(m, config.max_frames) for m in config.test_motions]
+    plan: list[tuple[str, int, str, tuple]] = []
+    plan += [("train", s, b, m) for s in train_shirts for b in train_bodies for m in train_m]
+    plan += [("test_body", s, b, m) for s in train_shirts for b in config.test_bodies for m in test_m[:1]]
+    plan += [("test_garment", s, b, m) for s in config.test_shirts for b in train_bodies for m in test_m[:1]]
+    plan += [("test_motion", s, b, m) for s in train_shirts[:2] for b in train_bodies[:2] for m in test_m]
+    plan += [("val", train_shirts[0], train_bodies[-1], m) for m in test_m[-1:]]
+    plan += [("val", config.test_shirts[0], config.test_bodies[-1], m) for m in test_m[-1:]] \
+        if config.test_shirts and config.test_bodies else []
+    garments: dict[tuple[int, str], tuple[np.ndarray, np.ndarray]] = {}
+    jobs = []
+    for split, s, b, (motion_name, poses, root) in plan:
+        if (s, b) not in garments:
+            garments[(s, b)] = make_tshirt(body, shapes[b].betas, variants[s])
+        verts, faces = garments[(s, b)]
+        _, joints = shape_body(body, shapes[b].betas)
+        jobs.append(Job(
+            name=f"{split}.shirt{s}.{b}.{motion_name}", garment_vertices=verts, garment_faces=faces,
+            betas=shapes[b].betas, poses=poses, transl=root, seed=config.seed,
+            meta={"split": split, "shirt": s, "shirt_params": dataclasses.asdict(variants[s]),
+                  "body": b, "motion": motion_name}))
+    return jobs
+
+
+def _worker(args: tuple) -> None:
+    jobs, out_dir, sim, dataset, name = args
+    from .simulate import SimConfig
+
+    run_jobs(jobs, out_dir, SimConfig(**sim), dataset=DatasetConfig(**dataset), manifest_name=name)
+
+
+def fit_training_pairs(jobs: list[Job], body) -> tuple[FitModel, dict[str, list[float]]]:
+    """Fit the fit-attribute factor analysis on the training garment-body pairs.
+
+    Returns the model and alpha for every pair of the data set (keyed ``shirt<i>.<body>``).
+    """
+    pairs = {}
+    for job in jobs:
+        key = f"shirt{job.meta['shirt']}.{job.meta['body']}"
+        if key not in pairs:
+            v_b, _ = shape_body(body, job.betas)
+            pairs[key] = (job.meta["split"] == "train", job.garment_vertices,
+                          associate(job.garment_vertices, v_b, body.faces), v_b)
+    train = [p for p in pairs.values() if p[0]]
+    if len(train) < 4:
+        raise ArgumentError(f"the fit attribute needs at least 4 training garment-body pairs for its "
+                            f"3 factors; this config has {len(train)} (add training shirts or bodies)")
+    covered = np.ones(body.num_vertices, bool)
+    for _, g, a, v_b in train:
+        covered &= cKDTree(v_b[a.vertex]).query(v_b)[0] < 0.02
+    anchors = select_anchors(shape_body(body, np.zeros(10))[0], covered, min(len(p[1]) for p in train))
+    d_train = np.stack([pair_distances(g, a, v_b, anchors) for _, g, a, v_b in train])
+    model, _ = fit_factor_analysis(d_train, anchors)
+    alphas = {k: model.transform(pair_distances(g, a, v_b, anchors)).tolist()
+              for k, (_, g, a, v_b) in pairs.items()}
+    return model, alphas
+
+
+def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1) -> Manifest:
+    """Plan, simulate (in ``workers`` processes), merge manifests, fit alpha. Resumable."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    body = load_body_model()
+    jobs = plan_jobs(config, body)
+    log.info("%d sequences planned", len(jobs))
+    workers = max(1, min(workers, len(jobs)))
+    names = [f"manifest.worker-{k}.json" for k in range(workers)]
+    parts = [(jobs[k::workers], out, config.sim, config.dataset, names[k]) for k in range(workers)]
+    if workers == 1:
+        _worker(parts[0])
+    else:
+        with ProcessPoolExecutor(max_workers=workers) as pool:
+            list(pool.map(_worker, parts))
+    try:
+        merged = Manifest.read(out)
+    except Exception:  # no earlier manifest
+        merged = None
+    for name in names:
+        part = Manifest.read(out, name)
+        if merged is None:
+            merged = part
+        merged.sequences.update(part.sequences)
+        merged.config, merged.dataset, merged.engine = part.config, part.dataset, part.engine
+        (out / name).unlink()
+    model, alphas = fit_training_pairs(jobs, body)
+    model.save(out / "fit.npz")
+    for job in jobs:
+        entry = merged.sequences.get(job.name)
+        if entry is not None:
+            entry["split"] = job.meta["split"]
+            entry["alpha"] = alphas[f"shirt{job.meta['shirt']}.{job.meta['body']}"]
+    merged.write(out, MANIFEST_NAME)
+    return merged
