@@ -11,7 +11,7 @@ import re
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Sequence
+from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
 
@@ -21,6 +21,9 @@ from .core.frames import reorient_poses, rest_orientation
 from .core.scene import Character, Garment, Scene, Tier
 from .core.skinning import bind_garment, skin_garment
 from .errors import ArgumentError, SceneError
+
+if TYPE_CHECKING:
+    from .runtime.bundle import ModelBundle
 
 __all__ = ["FrameRange", "GarmentReport", "BakeResult", "bake", "parse_frames", "parse_tier"]
 
@@ -83,6 +86,12 @@ class GarmentReport:
     frames: int
     mean_body_distance_mm: float
     """Mean rest distance of the garment's vertices to the body surface [mm]."""
+    bundle: str | None = None
+    """Name of the model bundle that animated it (None for the skinning tier)."""
+    fit: tuple[float, ...] | None = None
+    """The garment-body pair's fit attribute alpha (learned tiers only)."""
+    postprocess_moved: int = 0
+    """Vertex-frames the post-process pushed out of the body (summed over frames)."""
 
 
 @dataclass(frozen=True)
@@ -131,20 +140,40 @@ def _frame_range(scene: Scene, frames: FrameRange | str | None) -> FrameRange:
     return FrameRange(info.start_time_code, info.end_time_code)
 
 
-def _resolve_tier(garment: Garment, tier: Tier | None, source: str) -> Tier:
+def _resolve_tier(garment: Garment, tier: Tier | None, source: str, *,
+                  models: Sequence[str | Path] | None = None,
+                  found: dict | None = None) -> tuple[Tier, "ModelBundle | None"]:
+    """The garment's tier and, for a learned tier, the verified bundle of its category.
+
+    ``found`` caches bundles by category across garments.
+    """
     chosen = garment.tier or tier or Tier.SKINNING
-    if chosen is not Tier.SKINNING:
+    if chosen is Tier.SKINNING:
+        return chosen, None
+    from .runtime.bundle import default_bundle_dir, find_bundle
+
+    found = {} if found is None else found
+    if garment.category not in found:
+        found[garment.category] = find_bundle(garment.category, models)
+    bundle = found[garment.category]
+    if bundle is None:
+        dirs = ", ".join(str(d) for d in (models if models is not None else [default_bundle_dir()]))
         raise ArgumentError(
             f"{source} {garment.prim_path}: tier '{chosen.value}' needs a trained model bundle for "
-            f"category '{garment.category.value}', and none is installed (available: skinning)")
-    return chosen
+            f"category '{garment.category.value}', none found in {dirs} (available: skinning)")
+    if chosen not in bundle.tiers:
+        raise ArgumentError(
+            f"{source} {garment.prim_path}: tier '{chosen.value}' is not in bundle '{bundle.name}' "
+            f"({bundle.path}) (available: skinning, {', '.join(t.value for t in bundle.tiers)})")
+    return chosen, bundle
 
 
 def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None = None,
          frames: FrameRange | str | None = None, garments: Sequence[str] | None = None,
          tier: Tier | str | None = None, force: bool = False,
          body_model: str | Path | None = None, chunk: int = 64,
-         progress: bool = False) -> BakeResult:
+         progress: bool = False, models: str | Path | Sequence[str | Path] | None = None,
+         batch_size: int = 16) -> BakeResult:
     """Bake every enabled garment (or the named ones) of a stage into a point-cache layer.
 
     Args:
@@ -156,8 +185,11 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
         tier: default tier for garments without ``cloth:tier``.
         force: replace existing output files.
         body_model: SMPL-format file or folder, default the embedded model.
-        chunk: frames evaluated per batch.
+        chunk: frames evaluated per batch (skinning tier).
         progress: show a progress bar per garment.
+        models: folder(s) searched for model bundles (a bundle folder, or a folder of
+            bundles), default the shipped ``models/bundles``.
+        batch_size: frames per model call (learned tiers).
     """
     from .usd.read import garment_from_internal, open_stage, read_motion, read_scene
     from .usd.write import CacheLayerWriter, check_output_path, write_shot_layer
@@ -172,7 +204,10 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
     scene = read_scene(stage)
     source = scene.stage.identifier
     chosen = _select_garments(scene, garments, source)
-    tiers = {g.prim_path: _resolve_tier(g, tier, source) for g in chosen}
+    if isinstance(models, (str, Path)):
+        models = [models]
+    found: dict = {}
+    tiers = {g.prim_path: _resolve_tier(g, tier, source, models=models, found=found) for g in chosen}
     frange = _frame_range(scene, frames)
     times = frange.times()
 
@@ -190,10 +225,13 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
             if char.prim_path not in motions:
                 motions[char.prim_path] = read_motion(stage, char, times)
             motion = motions[char.prim_path]
-            report = _bake_garment(stage, writer, garment, char, body, motion, tiers[garment.prim_path],
-                                   chunk=chunk, progress=progress, garment_from_internal=garment_from_internal)
+            g_tier, g_bundle = tiers[garment.prim_path]
+            report = _bake_garment(stage, writer, garment, char, body, motion, g_tier,
+                                   chunk=chunk, progress=progress, garment_from_internal=garment_from_internal,
+                                   bundle=g_bundle, batch_size=batch_size)
             reports.append(report)
-        provenance = _provenance(scene, frange, bodies, reports)
+        used = {b.sha256: b for _, b in tiers.values() if b is not None}
+        provenance = _provenance(scene, frange, bodies, reports, list(used.values()))
         cache = writer.commit(provenance)
     shot_path = None
     if shot is not None:
@@ -215,20 +253,34 @@ def canonical_rest_points(garment: Garment, char: Character, joints: np.ndarray)
 
 
 def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyModel, motion,
-                  tier: Tier, *, chunk: int, progress: bool, garment_from_internal) -> GarmentReport:
+                  tier: Tier, *, chunk: int, progress: bool, garment_from_internal,
+                  bundle: "ModelBundle | None" = None, batch_size: int = 16) -> GarmentReport:
     from tqdm.auto import tqdm
 
     _, joints = shape_body(body, char.betas)
-    binding = bind_garment(body, char.betas, canonical_rest_points(garment, char, joints))
+    rest = canonical_rest_points(garment, char, joints)
+    binding = bind_garment(body, char.betas, rest)
     poses = reorient_poses(motion.poses, rest_orientation(char.rest_joints, joints))
     transl = motion.root_position - joints[0]
     to_prim = garment_from_internal(stage, garment.prim_path, motion.times)  # (T, 4, 4)
     num_t = motion.times.shape[0]
+    learned = None
+    if tier is not Tier.SKINNING:
+        from .runtime.garment import LearnedGarment
+
+        learned = LearnedGarment(bundle, body, char.betas, rest, garment.triangles, binding=binding)
+        chunk = batch_size
+    moved = 0
     with tqdm(total=num_t, desc=garment.prim_path, unit="frame", disable=not progress,
               leave=False) as bar:
         for lo in range(0, num_t, chunk):
             hi = min(lo + chunk, num_t)
-            pts = skin_garment(binding, poses[lo:hi], transl[lo:hi], body.parents)
+            if learned is None:
+                pts = skin_garment(binding, poses[lo:hi], transl[lo:hi], body.parents)
+            else:
+                frames = learned.evaluate(tier, poses[lo:hi], transl[lo:hi], batch_size=batch_size)
+                pts = frames.points
+                moved += int(frames.moved.sum())
             m = to_prim[lo:hi]
             local = np.einsum("tab,tnb->tna", m[:, :3, :3], pts) + m[:, None, :3, 3]
             writer.add_points(garment.prim_path, motion.times[lo:hi], local)
@@ -237,11 +289,32 @@ def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyMo
              num_t, tier.value)
     return GarmentReport(prim_path=garment.prim_path, tier=tier,
                          vertices=int(binding.rest_points.shape[0]), frames=num_t,
-                         mean_body_distance_mm=float(binding.association.distance.mean() * 1000.0))
+                         mean_body_distance_mm=float(binding.association.distance.mean() * 1000.0),
+                         bundle=None if learned is None else bundle.name,
+                         fit=None if learned is None else tuple(float(a) for a in learned.alpha),
+                         postprocess_moved=moved)
+
+
+def _garment_provenance(r: GarmentReport) -> dict:
+    out = {"tier": r.tier.value, "vertices": r.vertices, "frames": r.frames,
+           "mean_body_distance_mm": round(r.mean_body_distance_mm, 3)}
+    if r.fit is None:
+        out["fit"] = "not computed (skinning tier)"
+    else:  # a string of numbers: VtDictionary keeps no plain list of floats
+        out.update(fit=" ".join(f"{a:.6g}" for a in r.fit), model_bundle=r.bundle,
+                   postprocess_moved=r.postprocess_moved)
+    return out
 
 
 def _provenance(scene: Scene, frange: FrameRange, bodies: dict[str, BodyModel],
-                reports: list[GarmentReport]) -> dict:
+                reports: list[GarmentReport], bundles: list | None = None) -> dict:
+    bundles = bundles or []
+    if not bundles:
+        bundle = {"name": "none (skinning tier)", "sha256": ""}
+    elif len(bundles) == 1:
+        bundle = {"name": bundles[0].name, "sha256": bundles[0].sha256}
+    else:
+        bundle = {"name": ", ".join(b.name for b in bundles), "sha256": ", ".join(b.sha256 for b in bundles)}
     return {
         "cloth_usd": {
             "tool_version": __version__,
@@ -249,12 +322,7 @@ def _provenance(scene: Scene, frange: FrameRange, bodies: dict[str, BodyModel],
             "frame_range": f"{frange.start:g}:{frange.end:g}:{frange.step:g}",
             "body_models": {g: {"file": Path(b.source).name, "sha256": b.sha256}
                             for g, b in bodies.items()},
-            "model_bundle": {"name": "none (skinning tier)", "sha256": ""},
-            "garments": {
-                r.prim_path: {"tier": r.tier.value, "vertices": r.vertices, "frames": r.frames,
-                              "mean_body_distance_mm": round(r.mean_body_distance_mm, 3),
-                              "fit": "not computed (skinning tier)"}
-                for r in reports
-            },
+            "model_bundle": bundle,
+            "garments": {r.prim_path: _garment_provenance(r) for r in reports},
         }
     }

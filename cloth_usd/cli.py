@@ -33,12 +33,20 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--garment", action="append", metavar="PRIM", help="bake only this garment (repeatable)")
     b.add_argument("--tier", help="default tier for garments without cloth:tier: skinning, coarse, detail")
     b.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
+    b.add_argument("--models", metavar="DIR",
+                   help="model bundle folder, or a folder of bundles, for the coarse and detail tiers "
+                        "(default: the shipped models/bundles)")
     b.add_argument("--force", action="store_true", help="replace existing output files")
     b.add_argument("--no-progress", action="store_true", help="hide the progress bar")
 
     d = sub.add_parser("doctor", help="check the body model file(s) and the runtime")
     d.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
     d.add_argument("--gender", default="neutral", help="file to pick inside a folder: neutral, female, male")
+    g = sub.add_parser("datagen", help="simulate a ground-truth data set from a config (Newton)")
+    g.add_argument("config", help="data set config (.json or .toml; see cloth_usd.datagen.factory)")
+    g.add_argument("-o", "--output", required=True, help="folder for shards, manifest.json and fit.npz")
+    g.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
+
     r = sub.add_parser("render", help="draw body and garments at some frames to a PNG (a preview)")
     r.add_argument("scene", help="USD stage or shot layer to read")
     r.add_argument("-o", "--output", required=True, help="PNG to write")
@@ -61,6 +69,15 @@ def _render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _datagen(args: argparse.Namespace) -> int:
+    from .datagen.factory import load_config, run_factory
+
+    manifest = run_factory(load_config(args.config), args.output, workers=args.workers)
+    sys.stdout.write(f"{len(manifest.accepted)} sequences simulated, {len(manifest.rejected)} rejected "
+                     f"as unstable; manifest in {args.output}/manifest.json\n")
+    return 0
+
+
 def _inspect(args: argparse.Namespace) -> int:
     from .inspection import format_report, inspect_stage
 
@@ -73,10 +90,14 @@ def _bake(args: argparse.Namespace) -> int:
     from .baker import bake
 
     result = bake(args.scene, args.output, shot=args.shot, frames=args.frames, garments=args.garment,
-                  tier=args.tier, force=args.force, body_model=args.body_model,
+                  tier=args.tier, force=args.force, body_model=args.body_model, models=args.models,
                   progress=not args.no_progress and sys.stderr.isatty())
     for g in result.garments:
         sys.stdout.write(f"{g.prim_path}: {g.frames} frames, {g.vertices} vertices, tier {g.tier.value}\n")
+        if g.bundle is not None:
+            sys.stdout.write(f"{g.prim_path}: bundle {g.bundle}, fit {' '.join(f'{a:.3f}' for a in g.fit)}, "
+                             f"post-process moved {g.postprocess_moved} vertices "
+                             f"({g.postprocess_moved / max(1, g.frames):.1f} per frame)\n")
     per_frame = result.seconds / max(1, result.times.shape[0]) * 1000.0
     sys.stdout.write(f"wrote {result.cache} ({result.times.shape[0]} frames, {result.seconds:.2f} s, "
                      f"{per_frame:.1f} ms/frame)\n")
@@ -101,7 +122,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="cloth-usd: %(levelname)s: %(message)s")
     try:
-        commands = {"inspect": _inspect, "bake": _bake, "doctor": _doctor, "render": _render}
+        commands = {"inspect": _inspect, "bake": _bake, "doctor": _doctor, "render": _render,
+                    "datagen": _datagen}
         return commands[args.command](args)
     except ClothUsdError as exc:
         if args.verbose:

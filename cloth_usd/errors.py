@@ -14,6 +14,7 @@ __all__ = [
     "OutputExistsError",
     "ArgumentError",
     "MotionFileError",
+    "BundleError",
 ]
 
 
@@ -43,3 +44,7 @@ class ArgumentError(ClothUsdError):
 
 class MotionFileError(ClothUsdError):
     """A motion file (BVH, AMASS ``.npz``) is missing, malformed or lacks a joint or key."""
+
+
+class BundleError(ClothUsdError):
+    """A model bundle is missing a file, fails its sha256 check or has a bad manifest."""

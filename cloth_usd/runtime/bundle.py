@@ -1,0 +1,271 @@
+"""Model bundles: the exported models of one garment category, with a hashed manifest.
+
+A bundle is a folder::
+
+    <bundle>/manifest.json   format_version, name, category, tiers, opset, files {name: sha256},
+                             models {tier: {file, inputs, outputs, config}}, fit {file, ...},
+                             training_data {manifest_sha256, description}, metrics {...}
+    <bundle>/coarse.onnx     the coarse generator (inputs: runtime.io.COARSE_INPUTS)
+    <bundle>/detail.onnx     the detail generator with its parser (optional)
+    <bundle>/fit.npz         the fit attribute's factor-analysis model (FitModel.save)
+
+:func:`load_bundle` checks every listed file's sha256 before anything is used; the
+bundle's identity (recorded in every cache it bakes) is its name and the sha256 of its
+``manifest.json``, which in turn pins every file. Sessions are made lazily, once per
+bundle and tier.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import shutil
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+from ..core.fit import FitModel
+from ..core.scene import Category, Tier
+from ..errors import ArgumentError, BundleError
+from .io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT
+from .session import ModelSession
+
+__all__ = ["FORMAT_VERSION", "MANIFEST", "ModelBundle", "load_bundle", "find_bundle", "write_bundle",
+           "default_bundle_dir"]
+
+log = logging.getLogger(__name__)
+
+#: The manifest layout this runtime reads.
+FORMAT_VERSION = 1
+#: The manifest's file name inside a bundle folder.
+MANIFEST = "manifest.json"
+_INPUTS = {Tier.COARSE: COARSE_INPUTS, Tier.DETAIL: DETAIL_INPUTS}
+_FILES = {Tier.COARSE: "coarse.onnx", Tier.DETAIL: "detail.onnx"}
+_FIT = "fit.npz"
+_MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
+
+
+def default_bundle_dir() -> Path:
+    """The shipped bundles: ``cloth_usd/models/bundles`` when installed, else the repo's ``models/bundles``."""
+    installed = Path(__file__).resolve().parents[1] / "models" / "bundles"
+    return installed if installed.exists() else _MODELS_DIR / "bundles"
+
+
+def _sha256(path: Path) -> str:
+    h = hashlib.sha256()
+    with path.open("rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+@dataclass(eq=False)
+class ModelBundle:
+    """A verified model bundle; sessions are loaded on first use and kept."""
+
+    path: Path
+    """The bundle folder."""
+    name: str
+    category: Category
+    tiers: tuple[Tier, ...]
+    """Learned tiers the bundle can run (coarse, and detail when it ships detail.onnx)."""
+    sha256: str
+    """sha256 of ``manifest.json``: the bundle's identity."""
+    manifest: Mapping[str, Any]
+    """The parsed manifest."""
+    fit: FitModel
+    """The fit attribute's factor-analysis model."""
+    _sessions: dict = field(default_factory=dict, repr=False)
+
+    def model_path(self, tier: Tier) -> Path:
+        """The ONNX file of ``tier``."""
+        return self.path / self.manifest["models"][tier.value]["file"]
+
+    def session(self, tier: Tier | str, *, prefer_gpu: bool = True) -> ModelSession:
+        """The (cached) onnxruntime session of ``tier``; raises BundleError if not shipped."""
+        tier = Tier(tier)
+        if tier not in self.tiers:
+            raise BundleError(f"{self.path}: bundle '{self.name}' has no '{tier.value}' model "
+                              f"(tiers: {', '.join(t.value for t in self.tiers)})")
+        if tier not in self._sessions:
+            self._sessions[tier] = ModelSession(self.model_path(tier), prefer_gpu=prefer_gpu)
+        return self._sessions[tier]
+
+
+def _field(manifest: Mapping[str, Any], key: str, kind: type, where: Path) -> Any:
+    if key not in manifest or not isinstance(manifest[key], kind):
+        raise BundleError(f"{where}: manifest field '{key}' is missing or not a {kind.__name__}")
+    return manifest[key]
+
+
+def load_bundle(path: str | Path) -> ModelBundle:
+    """Read and verify a bundle folder.
+
+    Raises:
+        BundleError: naming the folder and the file at fault, when the manifest is
+            missing or malformed, its format_version or category is unknown, or a listed
+            file is missing or fails its sha256 check.
+    """
+    folder = Path(path)
+    mpath = folder / MANIFEST
+    if not mpath.is_file():
+        raise BundleError(f"{folder}: not a model bundle (no {MANIFEST})")
+    try:
+        raw = mpath.read_bytes()
+        manifest = json.loads(raw)
+    except (OSError, ValueError) as exc:
+        raise BundleError(f"{mpath}: unreadable manifest ({exc})") from exc
+    if not isinstance(manifest, dict):
+        raise BundleError(f"{mpath}: the manifest is not a JSON object")
+    version = manifest.get("format_version")
+    if version != FORMAT_VERSION:
+        raise BundleError(f"{mpath}: format_version {version!r} is not supported "
+                          f"(this cloth-usd reads {FORMAT_VERSION}); update cloth-usd or the bundle")
+    name = _field(manifest, "name", str, mpath)
+    try:
+        category = Category(_field(manifest, "category", str, mpath))
+    except ValueError:
+        valid = ", ".join(c.value for c in Category)
+        raise BundleError(f"{mpath}: unknown category '{manifest['category']}' (valid: {valid})") from None
+    files = _field(manifest, "files", dict, mpath)
+    models = _field(manifest, "models", dict, mpath)
+    try:
+        tiers = tuple(Tier(t) for t in _field(manifest, "tiers", list, mpath))
+    except ValueError:
+        raise BundleError(f"{mpath}: unknown tier in {manifest['tiers']} (valid: coarse, detail)") from None
+    if Tier.COARSE not in tiers or Tier.SKINNING in tiers:
+        raise BundleError(f"{mpath}: 'tiers' must list coarse (and optionally detail), got {manifest['tiers']}")
+    for tier in tiers:
+        entry = models.get(tier.value)
+        if not isinstance(entry, dict) or entry.get("file") not in files:
+            raise BundleError(f"{mpath}: models.{tier.value} must name a file listed in 'files'")
+        if tuple(entry.get("inputs", ())) != _INPUTS[tier] or list(entry.get("outputs", ())) != [OUTPUT]:
+            raise BundleError(f"{mpath}: models.{tier.value} inputs/outputs {entry.get('inputs')} -> "
+                              f"{entry.get('outputs')} do not match this runtime's "
+                              f"{list(_INPUTS[tier])} -> ['{OUTPUT}']")
+    fit_file = _field(manifest, "fit", dict, mpath).get("file")
+    if fit_file not in files:
+        raise BundleError(f"{mpath}: fit.file must name a file listed in 'files'")
+    for rel, digest in files.items():
+        f = folder / rel
+        if Path(rel).is_absolute() or ".." in Path(rel).parts:
+            raise BundleError(f"{mpath}: file '{rel}' must be a plain relative name inside the bundle")
+        if not f.is_file():
+            raise BundleError(f"{folder}: bundle file {rel} is missing")
+        got = _sha256(f)
+        if got != digest:
+            raise BundleError(f"{folder}: bundle file {rel} fails its sha256 check (manifest "
+                              f"{str(digest)[:12]}..., file {got[:12]}...); the bundle is corrupt or "
+                              "was edited, reinstall it")
+    try:
+        fit = FitModel.load(folder / fit_file)
+    except (OSError, ValueError, KeyError) as exc:
+        raise BundleError(f"{folder}: bundle file {fit_file} is not a fit model ({exc})") from exc
+    return ModelBundle(path=folder, name=name, category=category, tiers=tiers,
+                       sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit)
+
+
+def _candidates(folder: Path) -> list[Path]:
+    if (folder / MANIFEST).is_file():
+        return [folder]
+    return sorted(p for p in folder.iterdir() if (p / MANIFEST).is_file())
+
+
+def _category_of(bundle: Path) -> str | None:
+    try:
+        return json.loads((bundle / MANIFEST).read_bytes()).get("category")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | None = None
+                ) -> ModelBundle | None:
+    """The first bundle for ``category`` in the search folders, verified; None if there is none.
+
+    Args:
+        category: garment category.
+        search_dirs: folders that are bundles or hold bundle folders (``--models DIR``);
+            None for :func:`default_bundle_dir`. Bundles are tried in name order.
+    Raises:
+        ArgumentError: a given search folder does not exist.
+        BundleError: the matching bundle fails verification.
+    """
+    category = Category(category)
+    given = search_dirs is not None
+    dirs = [Path(d) for d in search_dirs] if given else [default_bundle_dir()]
+    for d in dirs:
+        if not d.is_dir():
+            if given:
+                raise ArgumentError(f"--models {d}: no such folder")
+            continue
+        for candidate in _candidates(d):
+            if _category_of(candidate) == category.value:
+                bundle = load_bundle(candidate)
+                log.info("model bundle %s (%s) for %s", bundle.name, bundle.path, category.value)
+                return bundle
+    return None
+
+
+def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, coarse_onnx: str | Path,
+                 detail_onnx: str | Path | None, fit_npz: str | Path, configs: Mapping[str, Any],
+                 training_data: Mapping[str, Any], metrics: Mapping[str, Any], opset: int,
+                 force: bool = False) -> Path:
+    """Copy exported models and the fit model into a new bundle folder and write its manifest.
+
+    Args:
+        out_dir: the bundle folder to create (must not exist, or be empty, unless ``force``).
+        name: the bundle's name (recorded in every cache it bakes).
+        category: garment category.
+        coarse_onnx, detail_onnx: exported generators (detail optional).
+        fit_npz: a :meth:`FitModel.save` file.
+        configs: ``{"coarse": {...}, "detail": {...}}`` the models' configs (JSON-able).
+        training_data: ``{"manifest_sha256": ..., "description": ...}``.
+        metrics: validation metrics (JSON-able), e.g. mean vertex error [mm].
+        opset: the ONNX opset of the exported files.
+    Returns:
+        The bundle folder.
+    """
+    out = Path(out_dir)
+    try:
+        category = Category(category)
+    except ValueError:
+        valid = ", ".join(c.value for c in Category)
+        raise ArgumentError(f"category '{category}': unknown (valid: {valid})") from None
+    if out.exists() and any(out.iterdir()) and not force:
+        raise ArgumentError(f"{out}: exists and is not empty (pass force to replace its files)")
+    sources = {Tier.COARSE: coarse_onnx, Tier.DETAIL: detail_onnx}
+    for tier, src in sources.items():
+        if src is not None and not Path(src).is_file():
+            raise ArgumentError(f"{src}: {tier.value} model file not found")
+    if not Path(fit_npz).is_file():
+        raise ArgumentError(f"{fit_npz}: fit model file not found")
+    fit = FitModel.load(fit_npz)
+    out.mkdir(parents=True, exist_ok=True)
+    files: dict[str, str] = {}
+    models: dict[str, Any] = {}
+    tiers = []
+    for tier, src in sources.items():
+        if src is None:
+            continue
+        shutil.copyfile(src, out / _FILES[tier])
+        files[_FILES[tier]] = _sha256(out / _FILES[tier])
+        models[tier.value] = {"file": _FILES[tier], "inputs": list(_INPUTS[tier]), "outputs": [OUTPUT],
+                              "config": dict(configs.get(tier.value, {}))}
+        tiers.append(tier.value)
+    shutil.copyfile(fit_npz, out / _FIT)
+    files[_FIT] = _sha256(out / _FIT)
+    manifest = {
+        "format_version": FORMAT_VERSION,
+        "name": name,
+        "category": category.value,
+        "tiers": tiers,
+        "opset": int(opset),
+        "files": files,
+        "models": models,
+        "fit": {"file": _FIT, "anchors": int(fit.anchors.shape[0]), "factors": int(fit.loadings.shape[1])},
+        "training_data": dict(training_data),
+        "metrics": dict(metrics),
+    }
+    (out / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+    return out

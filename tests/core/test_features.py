@@ -1,0 +1,76 @@
+"""Node features on tiny hand-built meshes."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cloth_usd.core.features import attributes, coarse_features, detail_features, vertex_normals
+from cloth_usd.errors import ArgumentError
+
+# A flat unit square in the z = 0 plane, two counter-clockwise triangles (seen from +z),
+# plus a zero-area triangle and an isolated vertex.
+SQUARE = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 2, 2], [5, 5, 5]], dtype=float)
+FACES = np.array([[0, 1, 2], [0, 2, 3], [4, 4, 4]])
+
+
+def test_normals_of_a_flat_square_and_degenerate_parts():
+    n = vertex_normals(SQUARE, FACES)
+    np.testing.assert_allclose(n[:4], np.tile([0, 0, 1.0], (4, 1)), atol=1e-12)
+    assert (n[4:] == 0).all() and np.isfinite(n).all()  # zero-area face, isolated vertex: 0, not NaN
+
+
+def test_normals_are_area_weighted_and_batched():
+    # A hinge: a big triangle facing +z and a small one facing +x share the edge 0-1.
+    pts = np.array([[0, 0, 0], [0, 1, 0], [-3, 0, 0], [0, 0, 0.5]], dtype=float)
+    faces = np.array([[0, 1, 2], [0, 1, 3]])  # areas 1.5 (normal +z) and 0.25 (normal +x)
+    want = np.array([0.25, 0, 1.5]) / np.hypot(0.25, 1.5)
+    frames = np.stack([pts, pts + 7.0])
+    n = vertex_normals(frames, faces)
+    assert n.shape == (2, 4, 3)
+    np.testing.assert_allclose(n[:, 0], [want, want], atol=1e-12)
+    np.testing.assert_allclose(n[1], vertex_normals(pts, faces), atol=1e-12)
+    with pytest.raises(ArgumentError):
+        vertex_normals(pts[:, :2], faces)
+
+
+def test_coarse_features():
+    body = np.stack([SQUARE, SQUARE + [0, 0, 1]])  # (T=2, V=6, 3)
+    normals = vertex_normals(body, FACES)
+    transl = np.array([[0, 0, 0], [0, 0, 1.0]])
+    f = coarse_features(body, normals, np.array([2, 2, 0]), transl, 0.7)
+    assert f.shape == (2, 3, 7)
+    np.testing.assert_allclose(f[:, :, :3], [[[0, 0, 1]] * 3] * 2)
+    np.testing.assert_allclose(f[0, 0, 3:6], [1, 1, 0])
+    np.testing.assert_allclose(f[1, 0, 3:6], [1, 1, 0])  # the translation is removed
+    assert (f[..., 6] == 0.7).all()
+
+
+def test_detail_features_joint_distances():
+    garment = np.stack([SQUARE[:4], SQUARE[:4] + [0, 0, 2]])  # (2, 4, 3)
+    faces = FACES[:2]
+    joints = np.zeros((2, 24, 3))
+    joints[:, 1] = [3, 4, 0]
+    joints[1] += [0, 0, 2]  # joints move with the garment: distances do not change
+    transl = np.array([[0, 0, 0], [0, 0, 2.0]])
+    f = detail_features(garment, faces, joints, transl)
+    assert f.shape == (2, 4, 30)
+    np.testing.assert_allclose(f[:, :, :3], np.broadcast_to([0, 0, 1.0], (2, 4, 3)))
+    np.testing.assert_allclose(f[1, :, 3:6], SQUARE[:4])
+    np.testing.assert_allclose(f[:, 0, 6], 0.0)           # vertex 0 sits on joint 0
+    np.testing.assert_allclose(f[:, 0, 7], 5.0)           # |(0,0,0) - (3,4,0)|
+    np.testing.assert_allclose(f[:, 2, 7], np.hypot(2, 3))
+    np.testing.assert_allclose(f[0, 2, 6:], f[1, 2, 6:])
+    with pytest.raises(ArgumentError, match="posed_joints"):
+        detail_features(garment, faces, joints[:, :10], transl)
+
+
+def test_attributes():
+    poses = np.arange(3 * 72, dtype=float).reshape(3, 72)
+    a = attributes(np.array([1.0, 2, 3]), np.array([0.5, -0.5]), poses)
+    assert a.shape == (3, 85)
+    np.testing.assert_array_equal(a[:, :3], [[1, 2, 3]] * 3)
+    np.testing.assert_array_equal(a[0, 3:13], [0.5, -0.5] + [0] * 8)
+    np.testing.assert_array_equal(a[:, 13:], poses)
+    with pytest.raises(ArgumentError, match="alpha"):
+        attributes(np.zeros(2), np.zeros(10), poses)

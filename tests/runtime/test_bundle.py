@@ -1,0 +1,102 @@
+"""Model bundles: write + load round trip, and every way a bundle can be broken."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from cloth_usd.core.scene import Category, Tier
+from cloth_usd.errors import ArgumentError, BundleError, ClothUsdError
+from cloth_usd.runtime import find_bundle, load_bundle
+
+from bundle_helpers import load_make_bundle, write_tiny_bundle
+
+
+@pytest.fixture
+def fake_exported(tmp_path):
+    """Stand-in files: load_bundle only hashes them (no session is made in these tests)."""
+    from cloth_usd.core.fit import FitModel
+
+    (tmp_path / "c.onnx").write_bytes(b"coarse model bytes")
+    (tmp_path / "d.onnx").write_bytes(b"detail model bytes")
+    FitModel(anchors=np.arange(4), mean=np.zeros(4), loadings=np.ones((4, 3)),
+             noise_variance=np.ones(4)).save(tmp_path / "fit.npz")
+    return tmp_path / "c.onnx", tmp_path / "d.onnx", tmp_path / "fit.npz", {"coarse": {"width": 0.125}}
+
+
+def test_round_trip(tmp_path, fake_exported):
+    folder = write_tiny_bundle(tmp_path / "b", fake_exported)
+    b = load_bundle(folder)
+    assert (b.name, b.category, b.tiers) == ("tiny-tshirt", Category.TSHIRT, (Tier.COARSE, Tier.DETAIL))
+    assert len(b.sha256) == 64 and b.fit.anchors.tolist() == [0, 1, 2, 3]
+    m = json.loads((folder / "manifest.json").read_text())
+    assert m["format_version"] == 1 and m["opset"] == 18
+    assert sorted(m["files"]) == ["coarse.onnx", "detail.onnx", "fit.npz"]
+    assert m["models"]["coarse"]["inputs"] == ["features", "nbr", "nbr_mask"]
+    assert m["models"]["coarse"]["config"] == {"width": 0.125}
+    assert m["training_data"]["description"] and m["metrics"] == {"note": "untrained"}
+    coarse_only = load_bundle(write_tiny_bundle(tmp_path / "c", fake_exported, detail=False))
+    assert coarse_only.tiers == (Tier.COARSE,)
+    with pytest.raises(BundleError, match="no 'detail' model"):
+        coarse_only.session("detail")
+
+
+def test_find_bundle_by_category(tmp_path, fake_exported):
+    write_tiny_bundle(tmp_path / "models" / "b", fake_exported)
+    assert find_bundle("tshirt", [tmp_path / "models"]).name == "tiny-tshirt"
+    assert find_bundle("tshirt", [tmp_path / "models" / "b"]).name == "tiny-tshirt"  # a bundle itself
+    assert find_bundle("dress", [tmp_path / "models"]) is None
+    with pytest.raises(ArgumentError, match="--models .*nope: no such folder"):
+        find_bundle("tshirt", [tmp_path / "nope"])
+
+
+def test_tampered_file_names_the_file(tmp_path, fake_exported):
+    folder = write_tiny_bundle(tmp_path / "b", fake_exported)
+    data = bytearray((folder / "coarse.onnx").read_bytes())
+    data[3] ^= 0x01
+    (folder / "coarse.onnx").write_bytes(bytes(data))
+    with pytest.raises(BundleError, match=r"b: bundle file coarse.onnx fails its sha256 check") as info:
+        load_bundle(folder)
+    assert isinstance(info.value, ClothUsdError) and str(folder) in str(info.value)
+
+
+def test_missing_file(tmp_path, fake_exported):
+    folder = write_tiny_bundle(tmp_path / "b", fake_exported)
+    (folder / "fit.npz").unlink()
+    with pytest.raises(BundleError, match="bundle file fit.npz is missing"):
+        load_bundle(folder)
+    shutil.rmtree(folder)
+    with pytest.raises(BundleError, match="not a model bundle"):
+        load_bundle(folder)
+
+
+@pytest.mark.parametrize("edit, expect", [
+    (lambda m: m.update(format_version=2), "format_version 2 is not supported"),
+    (lambda m: m.update(category="hat"), "unknown category 'hat'"),
+    (lambda m: m.update(tiers=["detail", "ultra"]), "unknown tier"),
+    (lambda m: m["models"]["coarse"].update(inputs=["x"]), "do not match this runtime"),
+    (lambda m: m["files"].update({"../evil": "0"}), "plain relative name"),
+])
+def test_bad_manifest(tmp_path, fake_exported, edit, expect):
+    folder = write_tiny_bundle(tmp_path / "b", fake_exported)
+    m = json.loads((folder / "manifest.json").read_text())
+    edit(m)
+    (folder / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(BundleError, match=expect):
+        load_bundle(folder)
+
+
+def test_make_bundle_script(tmp_path, fake_exported, capsys):
+    coarse, _, fit, _ = fake_exported
+    (tmp_path / "metrics.json").write_text('{"coarse_mm": 3.0}')
+    script = load_make_bundle()
+    argv = [str(tmp_path / "out"), "--name", "x", "--category", "tshirt", "--coarse", str(coarse),
+            "--fit", str(fit), "--metrics", str(tmp_path / "metrics.json"),
+            "--training-manifest", str(tmp_path / "metrics.json")]
+    assert script.main(argv) == 0
+    assert load_bundle(tmp_path / "out").manifest["metrics"] == {"coarse_mm": 3.0}
+    assert script.main(argv) == 2  # the folder is not empty now
+    assert "not empty" in capsys.readouterr().err
