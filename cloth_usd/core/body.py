@@ -8,7 +8,6 @@ V body vertices, J joints (24), B shape coefficients.
 
 from __future__ import annotations
 
-import hashlib
 import logging
 import zipfile
 from dataclasses import dataclass, field
@@ -18,6 +17,7 @@ from typing import Any, Mapping
 import numpy as np
 
 from ..errors import BodyModelError
+from .files import file_sha256, models_dir
 from .rotations import axis_angle_to_matrix
 from .smpl import NUM_JOINTS, PARENTS
 
@@ -29,6 +29,7 @@ __all__ = [
     "pose_feature",
     "joint_transforms",
     "posed_vertices",
+    "lbs",
     "SMPL_KEYS",
     "body_model_from_arrays",
 ]
@@ -38,13 +39,9 @@ log = logging.getLogger(__name__)
 #: Keys of the official SMPL layout that cloth_usd needs.
 SMPL_KEYS = ("v_template", "shapedirs", "posedirs", "J_regressor", "weights", "kintree_table", "f")
 
-_MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
-
-
 def default_body_model_path() -> Path:
     """The embedded body model shipped in ``models/body``."""
-    installed = Path(__file__).resolve().parents[1] / "models" / "body" / "cloth_usd_neutral.npz"
-    return installed if installed.exists() else _MODELS_DIR / "body" / "cloth_usd_neutral.npz"
+    return models_dir() / "body" / "cloth_usd_neutral.npz"
 
 
 @dataclass(frozen=True)
@@ -79,14 +76,6 @@ class BodyModel:
     @property
     def num_betas(self) -> int:
         return int(self.shapedirs.shape[2])
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
 
 
 def _read_raw(path: Path) -> dict[str, Any]:
@@ -209,7 +198,7 @@ def load_body_model(path: str | Path | None = None, *, gender: str = "neutral") 
         hint = " (the embedded model: reinstall cloth-usd)" if path is None else ""
         raise BodyModelError(f"{resolved}: body model file not found{hint}")
     raw = _read_raw(resolved)
-    return body_model_from_arrays(raw, source=str(resolved), sha256=_sha256(resolved))
+    return body_model_from_arrays(raw, source=str(resolved), sha256=file_sha256(resolved))
 
 
 def shape_body(body: BodyModel, betas: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -265,6 +254,30 @@ def joint_transforms(rotmats: np.ndarray, joints: np.ndarray,
     return world_t, skin
 
 
+def lbs(body: BodyModel, v_shaped: np.ndarray, joints: np.ndarray, poses: np.ndarray,
+        transl: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Pose an already shaped body (the shape is computed once per character).
+
+    Args:
+        v_shaped: (V, 3) unposed shaped body [m]; joints: (J, 3) its joints [m].
+        poses: (T, 72) axis-angle [rad].
+        transl: (T, 3) root translation [m], or None for zero.
+    Returns:
+        ``(vertices (T, V, 3) [m], posed joints (T, J, 3) [m])``, both with ``transl``.
+    """
+    rotmats = axis_angle_to_matrix(np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 3))
+    verts = np.broadcast_to(v_shaped, (rotmats.shape[0],) + v_shaped.shape)
+    if body.posedirs is not None:
+        verts = verts + np.einsum("vck,tk->tvc", body.posedirs, pose_feature(rotmats))
+    posed_joints, skin = joint_transforms(rotmats, joints, body.parents)
+    blended = np.einsum("vj,tjab->tvab", body.weights, skin)
+    out = np.einsum("tvab,tvb->tva", blended[..., :3], verts) + blended[..., 3]
+    if transl is not None:
+        shift = np.asarray(transl, dtype=np.float64)[:, None, :]
+        out, posed_joints = out + shift, posed_joints + shift
+    return out, posed_joints
+
+
 def posed_vertices(body: BodyModel, betas: np.ndarray, poses: np.ndarray,
                    transl: np.ndarray | None = None) -> np.ndarray:
     """The full SMPL forward pass, batched over frames.
@@ -276,15 +289,5 @@ def posed_vertices(body: BodyModel, betas: np.ndarray, poses: np.ndarray,
     Returns:
         (T, V, 3) float64 posed vertices [m].
     """
-    poses = np.asarray(poses, dtype=np.float64).reshape(-1, NUM_JOINTS, 3)
     v_shaped, joints = shape_body(body, betas)
-    rotmats = axis_angle_to_matrix(poses)
-    verts = np.broadcast_to(v_shaped, (poses.shape[0],) + v_shaped.shape)
-    if body.posedirs is not None:
-        verts = verts + np.einsum("vck,tk->tvc", body.posedirs, pose_feature(rotmats))
-    _, skin = joint_transforms(rotmats, joints, body.parents)
-    blended = np.einsum("vj,tjab->tvab", body.weights, skin)
-    out = np.einsum("tvab,tvb->tva", blended[..., :3], verts) + blended[..., 3]
-    if transl is not None:
-        out = out + np.asarray(transl, dtype=np.float64)[:, None, :]
-    return out
+    return lbs(body, v_shaped, joints, poses, transl)[0]

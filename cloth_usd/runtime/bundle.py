@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
+from ..core.files import file_sha256, models_dir
 from ..core.fit import FitModel
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError, BundleError
@@ -43,21 +44,11 @@ MANIFEST = "manifest.json"
 _INPUTS = {Tier.COARSE: COARSE_INPUTS, Tier.DETAIL: DETAIL_INPUTS}
 _FILES = {Tier.COARSE: "coarse.onnx", Tier.DETAIL: "detail.onnx"}
 _FIT = "fit.npz"
-_MODELS_DIR = Path(__file__).resolve().parents[2] / "models"
 
 
 def default_bundle_dir() -> Path:
-    """The shipped bundles: ``cloth_usd/models/bundles`` when installed, else the repo's ``models/bundles``."""
-    installed = Path(__file__).resolve().parents[1] / "models" / "bundles"
-    return installed if installed.exists() else _MODELS_DIR / "bundles"
-
-
-def _sha256(path: Path) -> str:
-    h = hashlib.sha256()
-    with path.open("rb") as fh:
-        for block in iter(lambda: fh.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
+    """The shipped bundles: ``models/bundles`` (see :func:`cloth_usd.core.files.models_dir`)."""
+    return models_dir() / "bundles"
 
 
 @dataclass(eq=False)
@@ -153,7 +144,7 @@ def load_bundle(path: str | Path) -> ModelBundle:
             raise BundleError(f"{mpath}: file '{rel}' must be a plain relative name inside the bundle")
         if not f.is_file():
             raise BundleError(f"{folder}: bundle file {rel} is missing")
-        got = _sha256(f)
+        got = file_sha256(f)
         if got != digest:
             raise BundleError(f"{folder}: bundle file {rel} fails its sha256 check (manifest "
                               f"{str(digest)[:12]}..., file {got[:12]}...); the bundle is corrupt or "
@@ -249,12 +240,12 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         if src is None:
             continue
         shutil.copyfile(src, out / _FILES[tier])
-        files[_FILES[tier]] = _sha256(out / _FILES[tier])
+        files[_FILES[tier]] = file_sha256(out / _FILES[tier])
         models[tier.value] = {"file": _FILES[tier], "inputs": list(_INPUTS[tier]), "outputs": [OUTPUT],
                               "config": dict(configs.get(tier.value, {}))}
         tiers.append(tier.value)
     shutil.copyfile(fit_npz, out / _FIT)
-    files[_FIT] = _sha256(out / _FIT)
+    files[_FIT] = file_sha256(out / _FIT)
     manifest = {
         "format_version": FORMAT_VERSION,
         "name": name,

@@ -14,12 +14,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.body import BodyModel, joint_transforms, pose_feature, shape_body
+from ..core.body import BodyModel, lbs, shape_body
 from ..core.features import attributes, coarse_features, detail_features, vertex_normals
 from ..core.fit import pair_distances
 from ..core.graph import MeshGraph, build_graph
 from ..core.postprocess import DEFAULT_MARGIN, push_out
-from ..core.rotations import axis_angle_to_matrix
 from ..core.scene import Tier
 from ..core.skinning import SkinBinding, bind_garment
 from ..core.smpl import NUM_JOINTS
@@ -38,23 +37,6 @@ class LearnedFrames:
     """(T, N, 3) float64 garment points [m], internal world frame."""
     moved: np.ndarray
     """(T,) int64 vertices the post-process pushed out of the body, per frame."""
-
-
-def _posed_body(body: BodyModel, v_shaped: np.ndarray, joints: np.ndarray, poses: np.ndarray,
-                transl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """SMPL forward pass that also returns the posed joints.
-
-    Returns:
-        ``(vertices (T, V, 3) [m], joints (T, J, 3) [m])``, both with ``transl`` added.
-    """
-    rotmats = axis_angle_to_matrix(poses.reshape(-1, NUM_JOINTS, 3))
-    verts = np.broadcast_to(v_shaped, (rotmats.shape[0],) + v_shaped.shape)
-    if body.posedirs is not None:
-        verts = verts + np.einsum("vck,tk->tvc", body.posedirs, pose_feature(rotmats))
-    posed_joints, skin = joint_transforms(rotmats, joints, body.parents)
-    blended = np.einsum("vj,tjab->tvab", body.weights, skin)
-    out = np.einsum("tvab,tvb->tva", blended[..., :3], verts) + blended[..., 3]
-    return out + transl[:, None, :], posed_joints + transl[:, None, :]
 
 
 class LearnedGarment:
@@ -129,7 +111,7 @@ class LearnedGarment:
         moved = np.zeros(num_t, dtype=np.int64)
         for lo in range(0, num_t, batch_size):
             hi = min(lo + batch_size, num_t)
-            verts, joints = _posed_body(self.body, self.v_shaped, self.joints, poses[lo:hi], transl[lo:hi])
+            verts, joints = lbs(self.body, self.v_shaped, self.joints, poses[lo:hi], transl[lo:hi])
             normals = vertex_normals(verts, self.body.faces)
             body_pts, body_nrm = verts[:, idx], normals[:, idx]
             feats = coarse_features(verts, normals, idx, transl[lo:hi], self.alpha[0])
