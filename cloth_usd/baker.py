@@ -17,7 +17,7 @@ import numpy as np
 
 from . import __version__
 from .core.body import BodyModel, load_body_model, shape_body
-from .core.frames import reorient_poses, rest_orientation
+from .core.frames import CanonicalMotion, canonical_motion
 from .core.scene import Character, Garment, Scene, Tier
 from .core.skinning import bind_garment, skin_garment
 from .errors import ArgumentError, SceneError
@@ -222,11 +222,11 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
             if char.gender not in bodies:
                 bodies[char.gender] = load_body_model(body_model, gender=char.gender)
             body = bodies[char.gender]
-            if char.prim_path not in motions:
-                motions[char.prim_path] = read_motion(stage, char, times)
-            motion = motions[char.prim_path]
+            if char.prim_path not in motions:  # once per character, whatever it wears
+                motions[char.prim_path] = canonical_motion(
+                    char, read_motion(stage, char, times), shape_body(body, char.betas)[1])
             g_tier, g_bundle = tiers[garment.prim_path]
-            report = _bake_garment(stage, writer, garment, char, body, motion, g_tier,
+            report = _bake_garment(stage, writer, garment, char, body, motions[char.prim_path], times, g_tier,
                                    chunk=chunk, progress=progress, garment_from_internal=garment_from_internal,
                                    bundle=g_bundle, batch_size=batch_size)
             reports.append(report)
@@ -242,28 +242,17 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
                       seconds=time.perf_counter() - began)
 
 
-def canonical_rest_points(garment: Garment, char: Character, joints: np.ndarray) -> np.ndarray:
-    """Garment rest points in the canonical body frame: the rest pelvis moved onto the
-    body's ``J(betas)[0]`` and the character's world turn undone.
-
-    Returns: (N, 3) float64 [m], canonical body frame.
-    """
-    turn = rest_orientation(char.rest_joints, joints)
-    return (garment.rest_points - char.rest_root_position) @ turn + joints[0]
-
-
-def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyModel, motion,
-                  tier: Tier, *, chunk: int, progress: bool, garment_from_internal,
-                  bundle: "ModelBundle | None" = None, batch_size: int = 16) -> GarmentReport:
+def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyModel,
+                  motion: CanonicalMotion, times: np.ndarray, tier: Tier, *, chunk: int, progress: bool,
+                  garment_from_internal, bundle: "ModelBundle | None" = None,
+                  batch_size: int = 16) -> GarmentReport:
     from tqdm.auto import tqdm
 
-    _, joints = shape_body(body, char.betas)
-    rest = canonical_rest_points(garment, char, joints)
+    rest = motion.rest_points(garment.rest_points)
     binding = bind_garment(body, char.betas, rest)
-    poses = reorient_poses(motion.poses, rest_orientation(char.rest_joints, joints))
-    transl = motion.root_position - joints[0]
-    to_prim = garment_from_internal(stage, garment.prim_path, motion.times)  # (T, 4, 4)
-    num_t = motion.times.shape[0]
+    poses, transl = motion.poses, motion.transl
+    to_prim = garment_from_internal(stage, garment.prim_path, times)  # (T, 4, 4)
+    num_t = times.shape[0]
     learned = None
     if tier is not Tier.SKINNING:
         from .runtime.garment import LearnedGarment
@@ -283,7 +272,7 @@ def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyMo
                 moved += int(frames.moved.sum())
             m = to_prim[lo:hi]
             local = np.einsum("tab,tnb->tna", m[:, :3, :3], pts) + m[:, None, :3, 3]
-            writer.add_points(garment.prim_path, motion.times[lo:hi], local)
+            writer.add_points(garment.prim_path, times[lo:hi], local)
             bar.update(hi - lo)
     log.info("%s: %d vertices, %d frames, tier %s", garment.prim_path, binding.rest_points.shape[0],
              num_t, tier.value)

@@ -12,8 +12,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .core.body import load_body_model, posed_vertices, shape_body
-from .core.frames import reorient_poses, rest_orientation
+from .core.body import lbs, load_body_model, shape_body
+from .core.frames import canonical_motion
 from .errors import ClothUsdError
 
 __all__ = ["render_frames"]
@@ -47,16 +47,15 @@ def render_frames(stage_path: str | Path, frames: Sequence[float], output: str |
     times = np.asarray(frames, dtype=np.float64)
     fig = plt.figure(figsize=(size[0] * len(times), size[1]), dpi=100)
     light = np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8])
+    bodies = []  # per character: (T, F, 3, 3) posed body triangles, evaluated once
+    for char in scene.characters:
+        body = load_body_model(body_model, gender=char.gender)
+        v_shaped, joints = shape_body(body, char.betas)
+        motion = canonical_motion(char, read_motion(stage, char, times), joints)
+        bodies.append(lbs(body, v_shaped, joints, motion.poses, motion.transl)[0][:, body.faces])
     for i, t in enumerate(times):
         ax = fig.add_subplot(1, len(times), i + 1, projection="3d")
-        meshes = []
-        for char in scene.characters:
-            body = load_body_model(body_model, gender=char.gender)
-            _, joints = shape_body(body, char.betas)
-            motion = read_motion(stage, char, times[i:i + 1])
-            poses = reorient_poses(motion.poses, rest_orientation(char.rest_joints, joints))
-            verts = posed_vertices(body, char.betas, poses, motion.root_position - joints[0])[0]
-            meshes.append((verts[body.faces], (0.85, 0.68, 0.58)))
+        meshes = [(tri[i], (0.85, 0.68, 0.58)) for tri in bodies]
         for g in scene.garments:
             pts = np.asarray(UsdGeom.Mesh(stage.GetPrimAtPath(g.prim_path)).GetPointsAttr().Get(float(t)),
                              dtype=np.float64)

@@ -34,18 +34,17 @@ def enable_addon(tmp: Path) -> None:
 
 def body_mesh(shot: Path, frame: float):
     """The posed body of the shot's character at ``frame``, as a Blender object."""
-    from cloth_usd.core.body import load_body_model, posed_vertices, shape_body
-    from cloth_usd.core.frames import reorient_poses, rest_orientation
+    from cloth_usd.core.body import lbs, load_body_model, shape_body
+    from cloth_usd.core.frames import canonical_motion
     from cloth_usd.usd.read import open_stage, read_motion, read_scene
 
     stage = open_stage(shot)
     scene = read_scene(stage)
     (char,) = scene.characters
     body = load_body_model(gender=char.gender)
-    _, joints = shape_body(body, char.betas)
-    motion = read_motion(stage, char, np.array([frame]))
-    poses = reorient_poses(motion.poses, rest_orientation(char.rest_joints, joints))
-    verts = posed_vertices(body, char.betas, poses, motion.root_position - joints[0])[0]
+    v_shaped, joints = shape_body(body, char.betas)
+    motion = canonical_motion(char, read_motion(stage, char, np.array([frame])), joints)
+    verts = lbs(body, v_shaped, joints, motion.poses, motion.transl)[0][0]
     mesh = bpy.data.meshes.new("Body")
     mesh.from_pydata(verts.tolist(), [], body.faces.tolist())
     mesh.shade_smooth()

@@ -8,12 +8,15 @@ whatever joint orientations (bone rolls) or stage axes a rig uses.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from .rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from .scene import Character, Motion
 from .smpl import NUM_JOINTS
 
-__all__ = ["body_frame", "rest_orientation", "reorient_poses"]
+__all__ = ["body_frame", "rest_orientation", "reorient_poses", "CanonicalMotion", "canonical_motion"]
 
 _PELVIS, _L_HIP, _R_HIP, _NECK, _L_SHOULDER, _R_SHOULDER = 0, 1, 2, 12, 16, 17
 
@@ -60,3 +63,42 @@ def reorient_poses(poses: np.ndarray, turn: np.ndarray) -> np.ndarray:
     out = turn.T @ rot @ turn
     out[:, 0] = rot[:, 0] @ turn
     return matrix_to_axis_angle(out).reshape(poses.shape)
+
+
+@dataclass(frozen=True)
+class CanonicalMotion:
+    """A character's motion expressed from SMPL's canonical rest, ready for the body model."""
+
+    joints: np.ndarray
+    """(J, 3) float64 the body model's ``J(betas)`` [m]."""
+    turn: np.ndarray
+    """(3, 3) float64 the character's world turn at rest (:func:`rest_orientation`)."""
+    rest_root_position: np.ndarray
+    """(3,) float64 the rest pelvis in the world [m]."""
+    poses: np.ndarray
+    """(T, 72) float64 axis-angle [rad], zero for a body facing +Z."""
+    transl: np.ndarray
+    """(T, 3) float64 SMPL root translation [m]."""
+
+    def rest_points(self, world_points: np.ndarray) -> np.ndarray:
+        """World rest points (a garment worn at rest) in the canonical body frame: the
+        rest pelvis moved onto ``J(betas)[0]`` and the world turn undone.
+
+        Args:
+            world_points: (N, 3) [m], internal world frame.
+        Returns:
+            (N, 3) float64 [m], canonical body frame.
+        """
+        return (world_points - self.rest_root_position) @ self.turn + self.joints[0]
+
+
+def canonical_motion(character: Character, motion: Motion, joints: np.ndarray) -> CanonicalMotion:
+    """Re-express a character's read motion from SMPL's canonical rest.
+
+    Args:
+        joints: (J, 3) the body model's ``J(betas)`` for ``character.betas`` [m].
+    """
+    turn = rest_orientation(character.rest_joints, joints)
+    return CanonicalMotion(joints=joints, turn=turn, rest_root_position=character.rest_root_position,
+                           poses=reorient_poses(motion.poses, turn),
+                           transl=motion.root_position - joints[0])
