@@ -15,13 +15,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from .association import Association
 
-__all__ = ["FitModel", "pair_distances", "select_anchors", "fit_factor_analysis"]
+__all__ = ["FitModel", "pair_distances", "select_anchors", "common_anchors", "fit_factor_analysis"]
 
 
 @dataclass(frozen=True)
@@ -81,6 +82,26 @@ def select_anchors(body_vertices: np.ndarray, covered: np.ndarray, count: int) -
         chosen[i] = int(np.argmax(dist))
         dist = np.minimum(dist, np.linalg.norm(pts - pts[chosen[i]], axis=1))
     return candidates[chosen]
+
+
+def common_anchors(pairs: Sequence[tuple[Association, np.ndarray]], mean_body: np.ndarray, count: int,
+                   *, reach: float = 0.02) -> np.ndarray:
+    """Anchors over the body region that every pair's garment covers.
+
+    A body vertex is covered by a pair when one of the garment's associated body
+    vertices lies within ``reach`` of it.
+
+    Args:
+        pairs: per garment-body pair, its association and its (V, 3) unposed body [m].
+        mean_body: (V, 3) the mean-shape body [m], where anchors are spread.
+        count: anchors wanted (N_g*: the smallest garment vertex count).
+    Returns:
+        (G,) int64 body vertex indices.
+    """
+    covered = np.ones(mean_body.shape[0], bool)
+    for association, body_vertices in pairs:
+        covered &= cKDTree(body_vertices[association.vertex]).query(body_vertices)[0] < reach
+    return select_anchors(mean_body, covered, count)
 
 
 def pair_distances(garment_points: np.ndarray, association: Association, body_vertices: np.ndarray,

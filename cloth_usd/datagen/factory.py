@@ -18,11 +18,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from ..core.association import associate
 from ..core.body import load_body_model, shape_body
-from ..core.fit import FitModel, fit_factor_analysis, pair_distances, select_anchors
+from ..core.fit import FitModel, common_anchors, fit_factor_analysis, pair_distances
 from ..errors import ArgumentError
 from .bodies import body_shapes
 from .dataset import MANIFEST_NAME, DatasetConfig, Job, Manifest, run_jobs
@@ -153,10 +152,8 @@ def fit_training_pairs(jobs: list[Job], body) -> tuple[FitModel, dict[str, list[
     if len(train) < 4:
         raise ArgumentError(f"the fit attribute needs at least 4 training garment-body pairs for its "
                             f"3 factors; this config has {len(train)} (add training shirts or bodies)")
-    covered = np.ones(body.num_vertices, bool)
-    for _, g, a, v_b in train:
-        covered &= cKDTree(v_b[a.vertex]).query(v_b)[0] < 0.02
-    anchors = select_anchors(shape_body(body, np.zeros(10))[0], covered, min(len(p[1]) for p in train))
+    anchors = common_anchors([(a, v_b) for _, _, a, v_b in train], shape_body(body, np.zeros(10))[0],
+                             min(len(p[1]) for p in train))
     d_train = np.stack([pair_distances(g, a, v_b, anchors) for _, g, a, v_b in train])
     model, _ = fit_factor_analysis(d_train, anchors)
     alphas = {k: model.transform(pair_distances(g, a, v_b, anchors)).tolist()

@@ -5,11 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import trimesh
-from scipy.spatial import cKDTree
 
 from cloth_usd.core.association import associate
 from cloth_usd.core.body import load_body_model, shape_body
-from cloth_usd.core.fit import fit_factor_analysis, pair_distances, select_anchors
+from cloth_usd.core.fit import common_anchors, fit_factor_analysis, pair_distances
 from cloth_usd.datagen.bodies import BODY_SHAPES, body_shapes
 from cloth_usd.datagen.tshirt import make_tshirt, tshirt_variants
 
@@ -59,10 +58,8 @@ def test_first_fit_factor_follows_the_ease(body):
             v_b, _ = shape_body(body, s.betas)
             g, _ = make_tshirt(body, s.betas, p)
             pairs.append((p.ease, g, associate(g, v_b, body.faces), v_b))
-    covered = np.ones(body.num_vertices, bool)
-    for _, g, a, v_b in pairs:
-        covered &= cKDTree(v_b[a.vertex]).query(v_b)[0] < 0.02
-    anchors = select_anchors(shape_body(body, np.zeros(10))[0], covered, min(len(p[1]) for p in pairs))
+    anchors = common_anchors([(a, v_b) for _, _, a, v_b in pairs], shape_body(body, np.zeros(10))[0],
+                             min(len(p[1]) for p in pairs))
     d = np.stack([pair_distances(g, a, v_b, anchors) for _, g, a, v_b in pairs])
     _, alpha = fit_factor_analysis(d, anchors)
     ease = np.array([p[0] for p in pairs])
