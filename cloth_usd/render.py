@@ -16,7 +16,10 @@ from .core.body import lbs, load_body_model, shape_body
 from .core.frames import canonical_motion
 from .errors import ClothUsdError
 
-__all__ = ["render_frames"]
+__all__ = ["draw_panels", "render_frames", "render_shard"]
+
+BODY_RGB = (0.85, 0.68, 0.58)
+GARMENT_RGB = (0.25, 0.45, 0.75)
 
 _VIEWS = {"front": (0.0, 0.0), "side": (0.0, 90.0), "three-quarter": (10.0, 35.0)}
 
@@ -27,41 +30,26 @@ def _shade(tri: np.ndarray, light: np.ndarray) -> np.ndarray:
     return 0.35 + 0.65 * np.abs(n @ light)
 
 
-def render_frames(stage_path: str | Path, frames: Sequence[float], output: str | Path, *,
-                  body_model: str | Path | None = None, view: str = "three-quarter",
-                  size: tuple[float, float] = (4.0, 5.0)) -> Path:
-    """Draw body and garments at each frame side by side into one PNG."""
+def draw_panels(panels: Sequence[tuple[str, list[tuple[np.ndarray, tuple[float, float, float]]]]],
+                output: str | Path, *, view: str = "three-quarter",
+                size: tuple[float, float] = (4.0, 5.0)) -> Path:
+    """Draw meshes side by side into one PNG, one panel per (title, meshes).
+
+    Args:
+        panels: per panel its title and meshes, each ``(triangles (F, 3, 3) [m] Y-up, rgb)``.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
-    from pxr import UsdGeom
-
-    from .usd.read import garment_from_internal, open_stage, read_motion, read_scene
 
     if view not in _VIEWS:
         raise ClothUsdError(f"--view '{view}': unknown (valid: {', '.join(_VIEWS)})")
-    stage = open_stage(stage_path)
-    scene = read_scene(stage)
-    times = np.asarray(frames, dtype=np.float64)
-    fig = plt.figure(figsize=(size[0] * len(times), size[1]), dpi=100)
+    fig = plt.figure(figsize=(size[0] * len(panels), size[1]), dpi=100)
     light = np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8])
-    bodies = []  # per character: (T, F, 3, 3) posed body triangles, evaluated once
-    for char in scene.characters:
-        body = load_body_model(body_model, gender=char.gender)
-        v_shaped, joints = shape_body(body, char.betas)
-        motion = canonical_motion(char, read_motion(stage, char, times), joints)
-        bodies.append(lbs(body, v_shaped, joints, motion.poses, motion.transl)[0][:, body.faces])
-    for i, t in enumerate(times):
-        ax = fig.add_subplot(1, len(times), i + 1, projection="3d")
-        meshes = [(tri[i], (0.85, 0.68, 0.58)) for tri in bodies]
-        for g in scene.garments:
-            pts = np.asarray(UsdGeom.Mesh(stage.GetPrimAtPath(g.prim_path)).GetPointsAttr().Get(float(t)),
-                             dtype=np.float64)
-            to_internal = np.linalg.inv(garment_from_internal(stage, g.prim_path, times[i:i + 1])[0])
-            pts = pts @ to_internal[:3, :3].T + to_internal[:3, 3]
-            meshes.append((pts[g.triangles], (0.25, 0.45, 0.75)))
+    for i, (title, meshes) in enumerate(panels):
+        ax = fig.add_subplot(1, len(panels), i + 1, projection="3d")
         # One collection, so matplotlib depth-sorts body and garment triangles together.
         tris = np.concatenate([m[0] for m in meshes])[:, :, [0, 2, 1]]  # matplotlib's z is up
         colors = np.concatenate([np.broadcast_to(c, (m.shape[0], 3)) for m, c in meshes])
@@ -75,8 +63,61 @@ def render_frames(stage_path: str | Path, frames: Sequence[float], output: str |
         elev, azim = _VIEWS[view]
         ax.view_init(elev=elev, azim=azim - 90)
         ax.set_axis_off()
-        ax.set_title(f"time code {t:g}")
+        ax.set_title(title)
     output = Path(output)
     fig.savefig(output, bbox_inches="tight")
     plt.close(fig)
     return output
+
+
+def render_frames(stage_path: str | Path, frames: Sequence[float], output: str | Path, *,
+                  body_model: str | Path | None = None, view: str = "three-quarter",
+                  size: tuple[float, float] = (4.0, 5.0)) -> Path:
+    """Draw body and garments at each frame side by side into one PNG."""
+    from pxr import UsdGeom
+
+    from .usd.read import garment_from_internal, open_stage, read_motion, read_scene
+
+    if view not in _VIEWS:
+        raise ClothUsdError(f"--view '{view}': unknown (valid: {', '.join(_VIEWS)})")
+    stage = open_stage(stage_path)
+    scene = read_scene(stage)
+    times = np.asarray(frames, dtype=np.float64)
+    bodies = []  # per character: (T, F, 3, 3) posed body triangles, evaluated once
+    for char in scene.characters:
+        body = load_body_model(body_model, gender=char.gender)
+        v_shaped, joints = shape_body(body, char.betas)
+        motion = canonical_motion(char, read_motion(stage, char, times), joints)
+        bodies.append(lbs(body, v_shaped, joints, motion.poses, motion.transl)[0][:, body.faces])
+    panels = []
+    for i, t in enumerate(times):
+        meshes = [(tri[i], BODY_RGB) for tri in bodies]
+        for g in scene.garments:
+            pts = np.asarray(UsdGeom.Mesh(stage.GetPrimAtPath(g.prim_path)).GetPointsAttr().Get(float(t)),
+                             dtype=np.float64)
+            to_internal = np.linalg.inv(garment_from_internal(stage, g.prim_path, times[i:i + 1])[0])
+            pts = pts @ to_internal[:3, :3].T + to_internal[:3, 3]
+            meshes.append((pts[g.triangles], GARMENT_RGB))
+        panels.append((f"time code {t:g}", meshes))
+    return draw_panels(panels, output, view=view, size=size)
+
+
+def render_shard(shard_path: str | Path, frames: Sequence[int], output: str | Path, *,
+                 body_model: str | Path | None = None, view: str = "three-quarter",
+                 size: tuple[float, float] = (4.0, 5.0)) -> Path:
+    """Draw a simulated sequence of the data factory (a shard) at some frame indices."""
+    from .datagen.dataset import read_shard
+
+    shard = read_shard(shard_path)
+    count = shard.positions.shape[0]
+    bad = [f for f in frames if not 0 <= int(f) < count]
+    if bad:
+        raise ClothUsdError(f"--frames {bad}: {shard_path} has frames 0-{count - 1}")
+    body = load_body_model(body_model)
+    v_shaped, joints = shape_body(body, shard.betas)
+    idx = np.asarray(frames, dtype=np.int64)
+    posed = lbs(body, v_shaped, joints, shard.poses[idx], shard.transl[idx])[0]
+    panels = [(f"frame {f}", [(posed[i][body.faces], BODY_RGB),
+                              (shard.positions[f].astype(np.float64)[shard.garment_faces], GARMENT_RGB)])
+              for i, f in enumerate(idx)]
+    return draw_panels(panels, output, view=view, size=size)

@@ -10,6 +10,7 @@ training pairs and saved beside the shards (``fit.npz``).
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 import json
 import logging
 import tomllib
@@ -28,7 +29,7 @@ from .dataset import MANIFEST_NAME, DatasetConfig, Job, Manifest, run_jobs
 from .motion import MotionKind, MotionSpec, generate
 from .tshirt import make_tshirt, tshirt_variants
 
-__all__ = ["FactoryConfig", "load_config", "plan_jobs", "run_factory"]
+__all__ = ["FactoryConfig", "load_config", "plan_jobs", "drape_pairs", "run_factory"]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +62,8 @@ class FactoryConfig:
     """DatasetConfig field overrides."""
     max_frames: int | None = None
     """Cut every motion to this many frames (tests)."""
+    test_body_shirts: int | None = None
+    """Training shirts worn by each test body (the first ones); None: all of them."""
 
 
 def load_config(path: str | Path) -> FactoryConfig:
@@ -91,6 +94,16 @@ def _motion(fields: dict, max_frames: int | None) -> tuple[str, np.ndarray, np.n
     return f"{MotionKind(spec.kind).value}-s{spec.seed}", poses, root
 
 
+def _body_label(betas: np.ndarray) -> str:
+    """thin / regular / fat from the girth component (beta 1), for evaluation rows."""
+    return "thin" if betas[1] < -0.5 else "fat" if betas[1] > 0.5 else "regular"
+
+
+def _shirt_label(params) -> str:
+    """short / regular / long from the hem height, for evaluation rows."""
+    return "short" if params.hem >= -0.02 else "long" if params.hem <= -0.10 else "regular"
+
+
 def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     """Every sequence of the data set, each tagged with its split in ``meta``."""
     body = body if body is not None else load_body_model()
@@ -108,7 +121,8 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     test_m = [_motion(m, config.max_frames) for m in config.test_motions]
     plan: list[tuple[str, int, str, tuple]] = []
     plan += [("train", s, b, m) for s in train_shirts for b in train_bodies for m in train_m]
-    plan += [("test_body", s, b, m) for s in train_shirts for b in config.test_bodies for m in test_m[:1]]
+    plan += [("test_body", s, b, m) for s in train_shirts[:config.test_body_shirts] for b in config.test_bodies
+             for m in test_m[:1]]
     plan += [("test_garment", s, b, m) for s in config.test_shirts for b in train_bodies for m in test_m[:1]]
     plan += [("test_motion", s, b, m) for s in train_shirts[:2] for b in train_bodies[:2] for m in test_m]
     plan += [("val", train_shirts[0], train_bodies[-1], m) for m in test_m[-1:]]
@@ -125,7 +139,8 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
             name=f"{split}.shirt{s}.{b}.{motion_name}", garment_vertices=verts, garment_faces=faces,
             betas=shapes[b].betas, poses=poses, transl=root, seed=config.seed,
             meta={"split": split, "shirt": s, "shirt_params": dataclasses.asdict(variants[s]),
-                  "body": b, "motion": motion_name}))
+                  "shirt_label": _shirt_label(variants[s]), "body": b,
+                  "body_label": _body_label(shapes[b].betas), "motion": motion_name}))
     return jobs
 
 
@@ -161,13 +176,71 @@ def fit_training_pairs(jobs: list[Job], body) -> tuple[FitModel, dict[str, list[
     return model, alphas
 
 
+def _pair(job: Job) -> str:
+    return f"shirt{job.meta['shirt']}.{job.meta['body']}"
+
+
+def _drape_path(out_dir, key: str, verts, faces, betas, sim: dict) -> Path:
+    """The cached drape of a pair: named by a digest of its inputs, so a changed garment or
+    solver setting drapes again."""
+    from .simulate import SimConfig
+
+    h = hashlib.sha256(json.dumps(SimConfig(**sim).to_json(), sort_keys=True).encode())
+    for a in (verts, faces, betas):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return Path(out_dir) / "drape" / f"{key}.{h.hexdigest()[:16]}.npz"
+
+
+def _drape_worker(args: tuple) -> tuple[str, str]:
+    """Drape one garment-body pair into ``out/drape/<pair>.npz`` (atomic); returns (pair, failure)."""
+    key, verts, faces, betas, out_dir, sim = args
+    from .simulate import SimConfig, SimulationError, drape
+
+    path = _drape_path(out_dir, key, verts, faces, betas, sim)
+    if path.exists():
+        return key, ""
+    try:
+        draped, result = drape(load_body_model(), betas, verts, faces, SimConfig(**sim))
+    except SimulationError as exc:
+        return key, str(exc)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, vertices=draped, faces=faces, source=verts,
+             quality=json.dumps(result.quality()))
+    tmp.replace(path)
+    return key, ""
+
+
+def drape_pairs(jobs: list[Job], out_dir: str | Path, sim: dict, *, workers: int = 1) -> tuple[list[Job], dict]:
+    """Drape every garment-body pair once (cached in ``out_dir/drape``) and put the draped
+    garment into its jobs. Pairs whose drape went unstable are dropped, with their reason."""
+    pairs = {}
+    for job in jobs:
+        pairs.setdefault(_pair(job), (job.garment_vertices, job.garment_faces, job.betas))
+    args = [(k, v, f, b, str(out_dir), sim) for k, (v, f, b) in pairs.items()]
+    if workers > 1 and len(args) > 1:
+        with ProcessPoolExecutor(max_workers=min(workers, len(args))) as pool:
+            done = list(pool.map(_drape_worker, args))
+    else:
+        done = [_drape_worker(a) for a in args]
+    failed = {k: why for k, why in done if why}
+    for k, why in failed.items():
+        log.warning("%s: %s; its sequences are left out", k, why)
+    draped = {k: np.load(_drape_path(out_dir, k, v, f, b, sim))["vertices"]
+              for k, (v, f, b) in pairs.items() if k not in failed}
+    out = [dataclasses.replace(j, garment_vertices=draped[_pair(j)]) for j in jobs if _pair(j) not in failed]
+    return out, failed
+
+
 def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1) -> Manifest:
-    """Plan, simulate (in ``workers`` processes), merge manifests, fit alpha. Resumable."""
+    """Plan, drape every pair, simulate (in ``workers`` processes), merge manifests, fit
+    alpha. Resumable."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     body = load_body_model()
-    jobs = plan_jobs(config, body)
-    log.info("%d sequences planned", len(jobs))
+    planned = plan_jobs(config, body)
+    log.info("%d sequences planned", len(planned))
+    jobs, drape_failed = drape_pairs(planned, out, config.sim, workers=workers)
     workers = max(1, min(workers, len(jobs)))
     names = [f"manifest.worker-{k}.json" for k in range(workers)]
     parts = [(jobs[k::workers], out, config.sim, config.dataset, names[k]) for k in range(workers)]
@@ -187,6 +260,13 @@ def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1)
         merged.sequences.update(part.sequences)
         merged.config, merged.dataset, merged.engine = part.config, part.dataset, part.engine
         (out / name).unlink()
+    if merged is None:
+        merged = Manifest(config={}, dataset={}, engine={})
+    for job in planned:
+        if _pair(job) in drape_failed:
+            merged.sequences[job.name] = {"status": "rejected", "shard": None, "seed": int(job.seed),
+                                          "digest": None, "meta": job.meta,
+                                          "quality": {"stable": False, "failure": drape_failed[_pair(job)]}}
     model, alphas = fit_training_pairs(jobs, body)
     model.save(out / "fit.npz")
     for job in jobs:

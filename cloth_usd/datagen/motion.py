@@ -21,6 +21,7 @@ from enum import Enum
 import numpy as np
 from scipy.spatial.transform import Rotation, Slerp
 
+from ..core.limits import EULER_ORDERS, JOINT_LIMITS, poses_to_euler
 from ..core.smpl import JOINT_NAMES, NUM_JOINTS
 from ..errors import ArgumentError, MotionFileError
 
@@ -42,49 +43,7 @@ _J = {name: i for i, name in enumerate(JOINT_NAMES)}
 
 
 # --------------------------------------------------------------------------- limits
-#: Intrinsic Euler order of each joint's angles (scipy's upper-case convention). The middle
-#: angle of each order stays inside (-90, 90) deg in :data:`JOINT_LIMITS`, so angles read
-#: back from a rotation are unique.
-EULER_ORDERS: tuple[str, ...] = tuple("YXZ" if name.endswith("_elbow") else "XYZ" for name in JOINT_NAMES)
-
-#: Plausible human ranges per joint, intrinsic Euler angles [deg] for the LEFT side and
-#: the midline; right joints are the mirror image (x kept, y and z negated and swapped).
-_LIMITS_DEG: dict[str, tuple[tuple[float, float], ...]] = {
-    "pelvis": ((-30, 30), (-45, 45), (-20, 20)),  # global orientation (dance sway only)
-    "spine1": ((-20, 45), (-30, 30), (-25, 25)),  # +x bends forward, y twists, z bends sideways
-    "spine2": ((-20, 45), (-30, 30), (-25, 25)),
-    "spine3": ((-20, 45), (-30, 30), (-25, 25)),
-    "neck": ((-30, 40), (-45, 45), (-30, 30)),
-    "head": ((-30, 40), (-40, 40), (-30, 30)),
-    "left_hip": ((-120, 30), (-45, 45), (-30, 50)),  # -x flexes forward, +z abducts
-    "left_knee": ((0, 140), (-5, 5), (-5, 5)),  # +x flexes
-    "left_ankle": ((-25, 50), (-20, 20), (-25, 25)),  # +x points the toes down
-    "left_foot": ((-45, 30), (-5, 5), (-5, 5)),
-    "left_collar": ((-15, 15), (-20, 20), (-15, 30)),  # +z shrugs
-    "left_shoulder": ((-90, 90), (-85, 40), (-90, 90)),  # -z lowers the arm, +z raises it
-    "left_elbow": ((-60, 60), (-150, 5), (-5, 5)),  # -y flexes the forearm forward
-    "left_wrist": ((-60, 60), (-30, 30), (-70, 70)),
-    "left_hand": ((-15, 15), (-15, 15), (-40, 15)),
-}
-
-
-def _limits_table() -> np.ndarray:
-    lim = np.zeros((NUM_JOINTS, 3, 2))
-    for name, rows in _LIMITS_DEG.items():
-        lim[_J[name]] = rows
-        if name.startswith("left_"):
-            mirror = np.array(rows, dtype=np.float64)
-            mirror[1:] = -mirror[1:, ::-1]
-            lim[_J["right_" + name[5:]]] = mirror
-    lim = np.deg2rad(lim)
-    lim.setflags(write=False)
-    return lim
-
-
-#: (24, 3, 2) [rad]: per joint and per Euler angle about x, y, z (in the joint's
-#: :data:`EULER_ORDERS`), the (low, high) bounds of plausible human motion. Every range
-#: contains 0 (the rest pose).
-JOINT_LIMITS: np.ndarray = _limits_table()
+# EULER_ORDERS and JOINT_LIMITS live in cloth_usd.core.limits (the baker warns with them).
 
 
 def euler_to_poses(euler: np.ndarray) -> np.ndarray:
@@ -105,17 +64,6 @@ def euler_to_poses(euler: np.ndarray) -> np.ndarray:
     return out.reshape(len(euler), 72)
 
 
-def poses_to_euler(poses: np.ndarray) -> np.ndarray:
-    """The inverse of :func:`euler_to_poses`: (T, 72) axis-angle -> (T, 24, 3) angles [rad]."""
-    poses = np.asarray(poses, dtype=np.float64)
-    rot = poses.reshape(len(poses), 24, 3)
-    out = np.empty_like(rot)
-    for order in sorted(set(EULER_ORDERS)):
-        joints = [j for j, o in enumerate(EULER_ORDERS) if o == order]
-        angles = Rotation.from_rotvec(rot[:, joints].reshape(-1, 3)).as_euler(order)
-        by_axis = np.argsort(["XYZ".index(a) for a in order])
-        out[:, joints] = angles.reshape(len(poses), len(joints), 3)[..., by_axis]
-    return out
 
 
 # --------------------------------------------------------------------------- sequence tools

@@ -43,6 +43,10 @@ class TShirtParams:
     target_vertices: int = 3500
     """Approximate vertex count after refinement."""
     smooth_iterations: int = 12
+    contact_clearance: float = 0.005
+    """Gap [m] kept where the shirt rests on the body (shoulders, the top of the chest):
+    a little above the simulator's contact margin, so the shirt starts resting rather than
+    falling onto the body."""
 
 
 def _count_rims(faces: np.ndarray) -> int:
@@ -107,8 +111,10 @@ def _snap_cuts(v: np.ndarray, faces: np.ndarray, joints: np.ndarray, p: TShirtPa
     return v
 
 
-def _push_out(v: np.ndarray, body_v: np.ndarray, body_f: np.ndarray, clearance: np.ndarray) -> np.ndarray:
-    """Move garment vertices that are closer than ``clearance`` to the body, or inside it."""
+def _push_out(v: np.ndarray, body_v: np.ndarray, body_f: np.ndarray, rest_on: float,
+              ease: np.ndarray) -> np.ndarray:
+    """Move garment vertices that are closer to the body than their clearance (see
+    :func:`_clearance`), or inside it, out along the body normal."""
     body = trimesh.Trimesh(body_v, body_f, process=False)
     normals = np.asarray(body.vertex_normals)
     assoc = associate(v, body_v, body_f)
@@ -117,8 +123,18 @@ def _push_out(v: np.ndarray, body_v: np.ndarray, body_f: np.ndarray, clearance: 
     normal = np.einsum("nk,nkc->nc", assoc.barycentric, normals[corners])
     normal /= np.linalg.norm(normal, axis=1, keepdims=True)
     height = np.einsum("nc,nc->n", v - surface, normal)
-    lift = np.maximum(clearance - height, 0.0)
+    lift = np.maximum(_clearance(normal, ease, rest_on) - height, 0.0)
     return v + normal * lift[:, None]
+
+
+def _clearance(normals: np.ndarray, ease: np.ndarray, rest_on: float) -> np.ndarray:
+    """(N,) distance [m] to keep from the body: the ease on the sides and below, none on top.
+
+    A worn shirt hangs from the shoulders: where the body surface faces up it rests on
+    it (``rest_on``), and the ease opens towards surfaces that face sideways or down.
+    """
+    up = np.clip(normals[:, 1], 0.0, 1.0)
+    return rest_on + ease * (1.0 - up)
 
 
 def make_tshirt(body: BodyModel, betas: np.ndarray, params: TShirtParams = TShirtParams()
@@ -135,7 +151,8 @@ def make_tshirt(body: BodyModel, betas: np.ndarray, params: TShirtParams = TShir
     mesh = trimesh.Trimesh(v, f, process=False)
     waist_y = joints[_PELVIS, 1] + 0.15
     flare = params.hem_flare * np.clip((waist_y - v[:, 1]) / (waist_y - hem_y), 0.0, 1.0)
-    v = v + np.asarray(mesh.vertex_normals) * (params.ease + flare)[:, None]
+    normals = np.asarray(mesh.vertex_normals)
+    v = v + normals * _clearance(normals, params.ease + flare, params.contact_clearance)[:, None]
     mesh = trimesh.Trimesh(_snap_cuts(v, f, joints, params, hem_y), f, process=False)
     trimesh.smoothing.filter_taubin(mesh, iterations=params.smooth_iterations)
     v, f = np.asarray(mesh.vertices), np.asarray(mesh.faces)
@@ -149,7 +166,7 @@ def make_tshirt(body: BodyModel, betas: np.ndarray, params: TShirtParams = TShir
     trimesh.smoothing.filter_taubin(mesh, iterations=4)
     v, f = _snap_cuts(np.asarray(mesh.vertices), np.asarray(mesh.faces), joints, params, hem_y), np.asarray(mesh.faces)
     flare = params.hem_flare * np.clip((waist_y - v[:, 1]) / (waist_y - hem_y), 0.0, 1.0)
-    v = _push_out(v, v_body, body.faces, 0.6 * params.ease + flare)
+    v = _push_out(v, v_body, body.faces, params.contact_clearance, params.ease + flare)
     return v, f.astype(np.int64)
 
 

@@ -17,7 +17,7 @@ TINY = {  # two training shirts x two training bodies (the fit needs 4 pairs), o
     "test_bodies": ["medium_regular"], "garment_vertices": 400, "max_frames": 2,
     "train_motions": [{"kind": "walk", "seconds": 1.0, "seed": 0}],
     "test_motions": [{"kind": "dance", "seconds": 1.0, "seed": 5}],
-    "sim": {"substeps": 2, "iterations": 2, "collider_faces": 2000},
+    "sim": {"substeps": 2, "iterations": 2, "collider_faces": 2000, "drape_frames": 1},
 }
 
 
@@ -60,3 +60,13 @@ def test_tiny_factory_run(tmp_path):
     stamp = {p.name: p.stat().st_mtime_ns for p in out.glob("*.npz") if p.name != "fit.npz"}
     assert main(["datagen", str(config_path), "-o", str(out)]) == 0
     assert stamp == {p.name: p.stat().st_mtime_ns for p in out.glob("*.npz") if p.name != "fit.npz"}
+    # Every pair was draped once, the labels evaluation needs are there, and a shard renders.
+    assert len(list((out / "drape").glob("*.npz"))) == len({(j.meta["shirt"], j.meta["body"]) for j in jobs})
+    meta = manifest["sequences"][kept[0]]["meta"]
+    assert meta["body_label"] in ("thin", "regular", "fat") and meta["shirt_label"] in ("short", "regular", "long")
+    png = tmp_path / "shard.png"
+    assert main(["render", str(out / manifest["sequences"][kept[0]]["shard"]), "-o", str(png),
+                 "--frames", "0,1"]) == 0
+    assert png.stat().st_size > 1000
+    assert main(["render", str(out / manifest["sequences"][kept[0]]["shard"]), "-o", str(png),
+                 "--frames", "0,99"]) == 2  # out of range: one line, exit 2
