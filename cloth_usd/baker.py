@@ -1,33 +1,50 @@
 """Bake: a USD shot in, a garment point-cache layer out.
 
 This module joins the USD boundary (``cloth_usd.usd``) with the numpy core; it holds
-no maths of its own. Shape letters: T frames, N garment vertices.
+no maths of its own. Frames are computed and handed to the layer writer a batch at a
+time, so memory grows with the output layer only. Shape letters: T frames, N garment
+vertices.
 """
 
 from __future__ import annotations
 
+import copy
+import hashlib
+import json
 import logging
+import os
 import re
 import time
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
 from . import __version__
 from .core.body import BodyModel, load_body_model, shape_body
+from .core.files import file_sha256
 from .core.frames import CanonicalMotion, canonical_motion
+from .core.limits import BETA_LIMIT, betas_outside, pose_outliers
 from .core.scene import Character, Garment, Scene, Tier
-from .core.skinning import bind_garment, skin_garment
-from .errors import ArgumentError, SceneError
+from .core.skinning import SkinBinding, bind_garment, skin_garment
+from .errors import ArgumentError, GarmentError, SceneError
 
 if TYPE_CHECKING:
     from .runtime.bundle import ModelBundle
 
-__all__ = ["FrameRange", "GarmentReport", "BakeResult", "bake", "parse_frames", "parse_tier"]
+__all__ = ["FrameRange", "GarmentReport", "BakeResult", "BakePlan", "ModelCache", "bake", "bake_plan",
+           "stitch_chunks", "parse_frames", "parse_tier", "FAR_FROM_BODY", "MAX_OFFSET"]
 
 log = logging.getLogger(__name__)
+
+#: A garment whose rest vertices lie further than this from the body surface on
+#: average [m] is warned about: its ``cloth:body`` may target the wrong character.
+FAR_FROM_BODY = 0.10
+#: Largest distance [m] a learned tier may move a vertex from its skinned position; a
+#: larger (or non-finite) model output is clamped there (or falls back to skinning), with a warning.
+MAX_OFFSET = 0.5
 
 
 @dataclass(frozen=True)
@@ -42,6 +59,10 @@ class FrameRange:
         """(T,) float64 time codes from start to end inclusive."""
         count = int(np.floor((self.end - self.start) / self.step + 1e-9)) + 1
         return self.start + self.step * np.arange(count, dtype=np.float64)
+
+    def __str__(self) -> str:
+        """``START:END:STEP``, as :func:`parse_frames` reads it."""
+        return f"{self.start:.10g}:{self.end:.10g}:{self.step:.10g}"
 
 
 _FRAMES = re.compile(r"^\s*(-?[\d.]+)\s*:\s*(-?[\d.]+)\s*(?::\s*([\d.]+)\s*)?$")
@@ -92,6 +113,14 @@ class GarmentReport:
     """The garment-body pair's fit attribute alpha (learned tiers only)."""
     postprocess_moved: int = 0
     """Vertex-frames the post-process pushed out of the body (summed over frames)."""
+    max_displacement_mm: float = 0.0
+    """Largest distance of a baked vertex from its rest position, root translation
+    removed, over all frames [mm] (canonical body frame)."""
+    max_offset_mm: float = 0.0
+    """Largest distance of a baked vertex from its skinned position [mm] (0 for the
+    skinning tier); never more than :data:`MAX_OFFSET`."""
+    warnings: tuple[str, ...] = ()
+    """The warnings logged for this garment (inputs outside the trained range, ...)."""
 
 
 @dataclass(frozen=True)
@@ -104,6 +133,68 @@ class BakeResult:
     """(T,) float64 baked time codes."""
     garments: tuple[GarmentReport, ...]
     seconds: float
+    skipped: bool = False
+    """True when ``skip_current`` found the cache already baked from the same inputs
+    (nothing was written; ``garments`` is empty)."""
+    inputs_sha256: str = ""
+    """Digest of everything the bake depends on (:class:`BakePlan`)."""
+
+
+@dataclass(frozen=True)
+class BakePlan:
+    """What a bake would do, known before any frame is computed (:func:`bake_plan`)."""
+
+    frames: FrameRange
+    garments: tuple[str, ...]
+    """Prim paths of the garments it bakes."""
+    inputs_sha256: str
+    """sha256 over the stage's layer files, the frame range, the garments and their
+    tiers, the body model and model bundle files, and the tool version. A cache records
+    it in its provenance; the same digest means the same bake."""
+    current: bool
+    """True when the output already holds this bake (same digest, every frame)."""
+
+
+class ModelCache:
+    """Body models, model bundles and bound garments kept across bakes.
+
+    A batch worker keeps one for all its jobs, so each body model and bundle is loaded
+    (and verified) once per process and each garment is bound to its body once, even
+    when its frames come in several chunks. Files are assumed not to change while a
+    cache lives.
+
+    Args:
+        max_garments: bound garments kept (least recently used dropped first).
+    """
+
+    def __init__(self, max_garments: int = 8) -> None:
+        self._bodies: dict[tuple[str, str], BodyModel] = {}
+        self._bundles: dict[tuple[str, ...] | None, dict] = {}
+        self._garments: OrderedDict[str, Any] = OrderedDict()
+        self.max_garments = max_garments
+
+    def body(self, path: str | Path | None, gender: str) -> BodyModel:
+        """The body model of :func:`~cloth_usd.core.body.load_body_model`, loaded once."""
+        key = ("" if path is None else os.path.abspath(path), gender)
+        if key not in self._bodies:
+            self._bodies[key] = load_body_model(path, gender=gender)
+        return self._bodies[key]
+
+    def bundles(self, models: Sequence[str | Path] | None) -> dict:
+        """The bundles found so far in these search folders, by category."""
+        key = None if models is None else tuple(os.path.abspath(m) for m in models)
+        return self._bundles.setdefault(key, {})
+
+    def garment(self, key: str, make: Callable[[], Any]) -> Any:
+        """``make()`` once per ``key``."""
+        if key in self._garments:
+            self._garments.move_to_end(key)
+            return self._garments[key]
+        value = make()
+        self._garments[key] = value
+        while len(self._garments) > self.max_garments:
+            self._garments.popitem(last=False)
+        return value
 
 
 def _select_garments(scene: Scene, names: Sequence[str] | None, source: str) -> list[Garment]:
@@ -168,12 +259,105 @@ def _resolve_tier(garment: Garment, tier: Tier | None, source: str, *,
     return chosen, bundle
 
 
+@dataclass
+class _Setup:
+    """Everything a bake resolves before computing a frame."""
+
+    stage: Any
+    scene: Scene
+    protected: list[str]
+    chosen: list[Garment]
+    tiers: dict[str, tuple[Tier, "ModelBundle | None"]]
+    frange: FrameRange
+    bodies: dict[str, BodyModel]
+    """By gender: the body models the chosen garments' characters use."""
+    inputs_sha256: str
+
+
+def _open(scene_path: str | Path) -> tuple[Any, list[str]]:
+    from .usd.read import open_stage
+
+    stage = open_stage(scene_path)
+    return stage, [layer.realPath for layer in stage.GetUsedLayers()]
+
+
+def _setup(stage, protected: list[str], *, frames, garments, tier, body_model, models,
+           cache: ModelCache) -> _Setup:
+    from .usd.read import read_scene
+
+    tier = parse_tier(tier)
+    scene = read_scene(stage)
+    source = scene.stage.identifier
+    chosen = _select_garments(scene, garments, source)
+    if isinstance(models, (str, Path)):
+        models = [models]
+    found = cache.bundles(models)
+    tiers = {g.prim_path: _resolve_tier(g, tier, source, models=models, found=found) for g in chosen}
+    frange = _frame_range(scene, frames)
+    characters = {c.prim_path: c for c in scene.characters}
+    bodies = {}
+    for g in chosen:
+        gender = characters[g.body_path].gender
+        if gender not in bodies:
+            bodies[gender] = cache.body(body_model, gender)
+    digest = _inputs_digest(protected, frange, chosen, tiers, characters, bodies)
+    return _Setup(stage=stage, scene=scene, protected=protected, chosen=chosen, tiers=tiers,
+                  frange=frange, bodies=bodies, inputs_sha256=digest)
+
+
+def _inputs_digest(layer_files: Sequence[str], frange: FrameRange, chosen: Sequence[Garment],
+                   tiers: dict, characters: dict[str, Character], bodies: dict[str, BodyModel]) -> str:
+    """sha256 of everything the cache depends on (see :attr:`BakePlan.inputs_sha256`)."""
+    files = [p for p in layer_files if p and os.path.isfile(p)]
+    layers = [file_sha256(files[0])] + sorted(file_sha256(p) for p in files[1:]) if files else []
+    payload = {
+        "tool_version": __version__,
+        "layers": layers,
+        "frames": [repr(float(frange.start)), repr(float(frange.end)), repr(float(frange.step))],
+        "garments": {g.prim_path: {"tier": tiers[g.prim_path][0].value,
+                                   "bundle": tiers[g.prim_path][1].sha256 if tiers[g.prim_path][1] else "",
+                                   "body": bodies[characters[g.body_path].gender].sha256}
+                     for g in chosen},
+    }
+    return hashlib.sha256(json.dumps(payload, sort_keys=True).encode()).hexdigest()
+
+
+def _is_current(output: str | Path, setup: _Setup) -> bool:
+    """True when ``output`` is a readable cache of exactly this bake."""
+    from .usd.write import cache_layer_info
+
+    info = cache_layer_info(output)
+    if info is None:
+        return False
+    prov = info.provenance.get("cloth_usd")
+    if not isinstance(prov, dict) or prov.get("inputs_sha256") != setup.inputs_sha256:
+        return False
+    count = setup.frange.times().shape[0]
+    return all(info.samples.get(f"{g.prim_path}.points") == count for g in setup.chosen)
+
+
+def bake_plan(scene_path: str | Path, output: str | Path | None = None, *,
+              frames: FrameRange | str | None = None, garments: Sequence[str] | None = None,
+              tier: Tier | str | None = None, body_model: str | Path | None = None,
+              models: str | Path | Sequence[str | Path] | None = None,
+              cache: ModelCache | None = None) -> BakePlan:
+    """Resolve a bake without computing it: its frames, garments and inputs digest, and
+    whether ``output`` already holds it. Arguments as for :func:`bake`."""
+    stage, protected = _open(scene_path)
+    setup = _setup(stage, protected, frames=frames, garments=garments, tier=tier, body_model=body_model,
+                   models=models, cache=cache or ModelCache())
+    return BakePlan(frames=setup.frange, garments=tuple(g.prim_path for g in setup.chosen),
+                    inputs_sha256=setup.inputs_sha256,
+                    current=output is not None and _is_current(output, setup))
+
+
 def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None = None,
          frames: FrameRange | str | None = None, garments: Sequence[str] | None = None,
          tier: Tier | str | None = None, force: bool = False,
          body_model: str | Path | None = None, chunk: int = 64,
          progress: bool = False, models: str | Path | Sequence[str | Path] | None = None,
-         batch_size: int = 16) -> BakeResult:
+         batch_size: int = 16, skip_current: bool = False, cache: ModelCache | None = None,
+         on_progress: Callable[[str, int, int], None] | None = None) -> BakeResult:
     """Bake every enabled garment (or the named ones) of a stage into a point-cache layer.
 
     Args:
@@ -190,108 +374,263 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
         models: folder(s) searched for model bundles (a bundle folder, or a folder of
             bundles), default the shipped ``models/bundles``.
         batch_size: frames per model call (learned tiers).
+        skip_current: when ``output`` already holds this very bake (its provenance has
+            the same :attr:`BakePlan.inputs_sha256` and every frame), write nothing and
+            return a result with ``skipped=True``. A different existing file still
+            needs ``force``.
+        cache: body models, bundles and bound garments to reuse across bakes.
+        on_progress: called with ``(garment prim, frames done, frames total)`` after
+            each batch of frames is added to the (temporary) layer.
     """
-    from .usd.read import garment_from_internal, open_stage, read_motion, read_scene
+    from .usd.read import garment_from_internal, read_motion
     from .usd.write import CacheLayerWriter, check_output_path, write_shot_layer
 
     began = time.perf_counter()
-    tier = parse_tier(tier)
-    stage = open_stage(scene_path)
-    protected = [layer.realPath for layer in stage.GetUsedLayers()]
+    cache = cache or ModelCache()
+    stage, protected = _open(scene_path)
+    check_output_path(output, force=force or skip_current, protected=protected)
+    if shot is not None:
+        check_output_path(shot, force=force or skip_current, protected=protected)
+    setup = _setup(stage, protected, frames=frames, garments=garments, tier=tier, body_model=body_model,
+                   models=models, cache=cache)
+    scene, times = setup.scene, setup.frange.times()
+    scene_file = Path(stage.GetRootLayer().realPath)
+    if skip_current and _is_current(output, setup):
+        log.info("%s is up to date (inputs %s); nothing to bake", output, setup.inputs_sha256[:12])
+        shot_path = None
+        if shot is not None:
+            shot_path = Path(shot) if Path(shot).exists() and not force else write_shot_layer(
+                shot, cache=output, scene=scene_file, stage=scene.stage, start=times[0], end=times[-1],
+                force=True, protected=protected)
+        return BakeResult(cache=Path(output), shot=shot_path, times=times, garments=(),
+                          seconds=time.perf_counter() - began, skipped=True,
+                          inputs_sha256=setup.inputs_sha256)
     check_output_path(output, force=force, protected=protected)
     if shot is not None:
         check_output_path(shot, force=force, protected=protected)
-    scene = read_scene(stage)
-    source = scene.stage.identifier
-    chosen = _select_garments(scene, garments, source)
-    if isinstance(models, (str, Path)):
-        models = [models]
-    found: dict = {}
-    tiers = {g.prim_path: _resolve_tier(g, tier, source, models=models, found=found) for g in chosen}
-    frange = _frame_range(scene, frames)
-    times = frange.times()
 
     characters = {c.prim_path: c for c in scene.characters}
-    bodies: dict[str, BodyModel] = {}
-    motions = {}
+    motions: dict[str, tuple[CanonicalMotion, list[str]]] = {}
     reports = []
     with CacheLayerWriter(output, stage=scene.stage, start=times[0], end=times[-1],
                           force=force, protected=protected) as writer:
-        for garment in chosen:
+        for garment in setup.chosen:
             char: Character = characters[garment.body_path]
-            if char.gender not in bodies:
-                bodies[char.gender] = load_body_model(body_model, gender=char.gender)
-            body = bodies[char.gender]
+            body = setup.bodies[char.gender]
             if char.prim_path not in motions:  # once per character, whatever it wears
-                motions[char.prim_path] = canonical_motion(
-                    char, read_motion(stage, char, times), shape_body(body, char.betas)[1])
-            g_tier, g_bundle = tiers[garment.prim_path]
-            report = _bake_garment(stage, writer, garment, char, body, motions[char.prim_path], times, g_tier,
+                motion = canonical_motion(char, read_motion(stage, char, times), shape_body(body, char.betas)[1])
+                motions[char.prim_path] = motion, _range_notes(char, motion, times)
+            motion, notes = motions[char.prim_path]
+            g_tier, g_bundle = setup.tiers[garment.prim_path]
+            report = _bake_garment(stage, writer, garment, char, body, motion, times, g_tier,
                                    chunk=chunk, progress=progress, garment_from_internal=garment_from_internal,
-                                   bundle=g_bundle, batch_size=batch_size)
+                                   bundle=g_bundle, batch_size=batch_size, cache=cache, notes=notes,
+                                   source=scene.stage.identifier, on_progress=on_progress)
             reports.append(report)
-        used = {b.sha256: b for _, b in tiers.values() if b is not None}
-        provenance = _provenance(scene, frange, bodies, reports, list(used.values()))
-        cache = writer.commit(provenance)
+        used = {b.sha256: b for _, b in setup.tiers.values() if b is not None}
+        provenance = _provenance(scene, setup.frange, setup.bodies, reports, list(used.values()))
+        provenance["cloth_usd"]["inputs_sha256"] = setup.inputs_sha256
+        cache_path = writer.commit(provenance)
     shot_path = None
     if shot is not None:
-        shot_path = write_shot_layer(shot, cache=cache, scene=Path(stage.GetRootLayer().realPath),
+        shot_path = write_shot_layer(shot, cache=cache_path, scene=scene_file,
                                      stage=scene.stage, start=times[0], end=times[-1],
                                      force=force, protected=protected)
-    return BakeResult(cache=cache, shot=shot_path, times=times, garments=tuple(reports),
-                      seconds=time.perf_counter() - began)
+    return BakeResult(cache=cache_path, shot=shot_path, times=times, garments=tuple(reports),
+                      seconds=time.perf_counter() - began, inputs_sha256=setup.inputs_sha256)
+
+
+def _range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray) -> list[str]:
+    """What in a character's shape and motion lies outside the trained range, one line each."""
+    notes = []
+    outside = betas_outside(char.betas)
+    if outside.size:
+        listed = ", ".join(f"beta[{i}] = {char.betas[i]:g}" for i in outside)
+        notes.append(f"body <{char.prim_path}> has {listed}, outside the trained range "
+                     f"|beta| <= {BETA_LIMIT:g}, at every frame")
+    poses = pose_outliers(motion.poses)
+    if poses is not None:
+        first = times[poses.frames[0]]
+        notes.append(f"body <{char.prim_path}> is posed outside the trained joint limits at frame "
+                     f"{first:g} ({poses.joint} {poses.angle_deg:.0f} deg about {poses.axis}, trained "
+                     f"{poses.low_deg:.0f}..{poses.high_deg:.0f}) and at {poses.frames.size - 1} other "
+                     f"of {times.shape[0]} frames")
+    return notes
+
+
+def _garment_key(garment: Garment, body: BodyModel, betas: np.ndarray, rest: np.ndarray,
+                 tier: Tier, bundle: "ModelBundle | None") -> str:
+    h = hashlib.sha256()
+    for part in (body.sha256.encode(), tier.value.encode(), (bundle.sha256 if bundle else "").encode(),
+                 np.ascontiguousarray(betas, dtype=np.float64).tobytes(),
+                 np.ascontiguousarray(rest, dtype=np.float64).tobytes(),
+                 np.ascontiguousarray(garment.triangles, dtype=np.int64).tobytes()):
+        h.update(part)
+        h.update(b"|")
+    return h.hexdigest()
 
 
 def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyModel,
                   motion: CanonicalMotion, times: np.ndarray, tier: Tier, *, chunk: int, progress: bool,
                   garment_from_internal, bundle: "ModelBundle | None" = None,
-                  batch_size: int = 16) -> GarmentReport:
+                  batch_size: int = 16, cache: ModelCache | None = None, notes: Sequence[str] = (),
+                  source: str = "", on_progress: Callable[[str, int, int], None] | None = None
+                  ) -> GarmentReport:
     from tqdm.auto import tqdm
 
+    cache = cache or ModelCache()
+    where = f"{source} <{garment.prim_path}>"
     rest = motion.rest_points(garment.rest_points)
-    binding = bind_garment(body, char.betas, rest)
+
+    def prepare() -> tuple[SkinBinding, Any]:
+        binding = bind_garment(body, char.betas, rest)
+        if tier is Tier.SKINNING:
+            return binding, None
+        from .runtime.garment import LearnedGarment
+
+        return binding, LearnedGarment(bundle, body, char.betas, rest, garment.triangles, binding=binding)
+
+    binding, learned = cache.garment(_garment_key(garment, body, char.betas, rest, tier, bundle), prepare)
+    warnings = [f"{where}: {note}" for note in notes]
+    distance = float(binding.association.distance.mean())
+    if distance > FAR_FROM_BODY:
+        warnings.append(f"{where}: the garment lies {distance:.2f} m from the body <{char.prim_path}> on "
+                        f"average at rest (a worn garment is within {FAR_FROM_BODY:g} m); check its "
+                        "cloth:body and rest points")
+    for w in warnings:
+        log.warning("%s", w)
     poses, transl = motion.poses, motion.transl
     to_prim = garment_from_internal(stage, garment.prim_path, times)  # (T, 4, 4)
     num_t = times.shape[0]
-    learned = None
-    if tier is not Tier.SKINNING:
-        from .runtime.garment import LearnedGarment
-
-        learned = LearnedGarment(bundle, body, char.betas, rest, garment.triangles, binding=binding)
+    if learned is not None:
         chunk = batch_size
-    moved = 0
+    moved, max_disp, max_off = 0, 0.0, 0.0
+    fixes: list[tuple[str, float, int]] = []
     with tqdm(total=num_t, desc=garment.prim_path, unit="frame", disable=not progress,
               leave=False) as bar:
         for lo in range(0, num_t, chunk):
             hi = min(lo + chunk, num_t)
-            if learned is None:
-                pts = skin_garment(binding, poses[lo:hi], transl[lo:hi], body.parents)
-            else:
+            skinned = skin_garment(binding, poses[lo:hi], transl[lo:hi], body.parents)
+            pts = skinned
+            if learned is not None:
                 frames = learned.evaluate(tier, poses[lo:hi], transl[lo:hi], batch_size=batch_size)
-                pts = frames.points
+                pts, off, fixed = _bound_offsets(frames.points, skinned)
+                max_off = max(max_off, off)
+                fixes.extend((kind, float(times[lo + i]), n) for kind, i, n in fixed)
                 moved += int(frames.moved.sum())
+            bad = ~np.isfinite(pts).all(axis=(1, 2))
+            if bad.any():
+                raise GarmentError(f"{where}: the deformed points are not finite at frame "
+                                   f"{times[lo + int(np.argmax(bad))]:g} (tier {tier.value}); nothing "
+                                   "was written. Check the skeleton's animation at that frame")
+            disp = np.linalg.norm(pts - transl[lo:hi, None, :] - binding.rest_points, axis=-1)
+            max_disp = max(max_disp, float(disp.max()))
             m = to_prim[lo:hi]
             local = np.einsum("tab,tnb->tna", m[:, :3, :3], pts) + m[:, None, :3, 3]
             writer.add_points(garment.prim_path, times[lo:hi], local)
             bar.update(hi - lo)
+            if on_progress is not None:
+                on_progress(garment.prim_path, hi, num_t)
+    for kind in ("non-finite", "too far"):
+        hits = [(t, n) for k, t, n in fixes if k == kind]
+        if hits:
+            what = ("was not finite; those vertices fall back to skinning" if kind == "non-finite" else
+                    f"moved vertices more than {MAX_OFFSET:g} m from their skinned position; clamped")
+            w = (f"{where}: the {tier.value} model output {what}: {sum(n for _, n in hits)} vertex-frames, "
+                 f"first at frame {hits[0][0]:g}, in {len(hits)} frames")
+            log.warning("%s", w)
+            warnings.append(w)
     log.info("%s: %d vertices, %d frames, tier %s", garment.prim_path, binding.rest_points.shape[0],
              num_t, tier.value)
     return GarmentReport(prim_path=garment.prim_path, tier=tier,
                          vertices=int(binding.rest_points.shape[0]), frames=num_t,
-                         mean_body_distance_mm=float(binding.association.distance.mean() * 1000.0),
+                         mean_body_distance_mm=distance * 1000.0,
                          bundle=None if learned is None else bundle.name,
                          fit=None if learned is None else tuple(float(a) for a in learned.alpha),
-                         postprocess_moved=moved)
+                         postprocess_moved=moved, max_displacement_mm=max_disp * 1000.0,
+                         max_offset_mm=max_off * 1000.0, warnings=tuple(warnings))
+
+
+def _bound_offsets(points: np.ndarray, skinned: np.ndarray
+                   ) -> tuple[np.ndarray, float, list[tuple[str, int, int]]]:
+    """Keep a learned tier's points finite and within :data:`MAX_OFFSET` of skinning.
+
+    Args:
+        points: (T, N, 3) the model's garment points [m].
+        skinned: (T, N, 3) the skinned points of the same frames [m].
+    Returns:
+        ``(points (T, N, 3), largest offset kept [m], [(kind, frame index, vertices)])``
+        with kind ``non-finite`` or ``too far``.
+    """
+    offset = points - skinned
+    finite = np.isfinite(offset).all(axis=-1)  # (T, N)
+    offset = np.where(finite[..., None], offset, 0.0)
+    length = np.linalg.norm(offset, axis=-1)
+    far = length > MAX_OFFSET
+    scale = np.where(far, MAX_OFFSET / np.maximum(length, 1e-12), 1.0)
+    fixed = [("non-finite", int(t), int(n)) for t, n in enumerate((~finite).sum(axis=1)) if n]
+    fixed += [("too far", int(t), int(n)) for t, n in enumerate(far.sum(axis=1)) if n]
+    return skinned + offset * scale[..., None], float(np.minimum(length, MAX_OFFSET).max(initial=0.0)), fixed
+
+
+def stitch_chunks(chunks: Sequence[str | Path], output: str | Path, *, inputs_sha256: str = "",
+                  force: bool = False) -> Path:
+    """Join caches that :func:`bake` wrote for consecutive frame chunks of one bake.
+
+    The result is the cache one bake of the whole range writes: the same time samples,
+    and provenance with the whole frame range, frame counts summed and, given the whole
+    bake's ``inputs_sha256`` (:func:`bake_plan`), the same digest.
+
+    Args:
+        chunks: the chunk caches, in time order.
+        output: the cache layer to write.
+    Raises:
+        ArgumentError: a chunk is missing, unreadable, or not from the same bake.
+    """
+    from .usd.write import cache_layer_info, stitch_layers
+
+    provs, infos = [], []
+    for c in chunks:
+        info = cache_layer_info(c)
+        prov = None if info is None else info.provenance.get("cloth_usd")
+        if not isinstance(prov, dict):
+            raise ArgumentError(f"{c}: not a cloth_usd cache layer; cannot stitch it into {output}")
+        provs.append(prov)
+        infos.append(info)
+    if not provs:
+        raise ArgumentError(f"{output}: no chunk layers to stitch")
+    first = provs[0]
+    for c, p in zip(chunks, provs):
+        for key in ("source_layer", "model_bundle", "body_models"):
+            if p.get(key) != first.get(key):
+                raise ArgumentError(f"{c}: {key} differs from {chunks[0]}'s; chunks of one bake only")
+        if set(p.get("garments", {})) != set(first.get("garments", {})):
+            raise ArgumentError(f"{c}: bakes other garments than {chunks[0]}; chunks of one bake only")
+    merged = copy.deepcopy(first)
+    step = float(str(first.get("frame_range", "0:0:1")).split(":")[-1])
+    merged["frame_range"] = str(FrameRange(infos[0].start, infos[-1].end, step))
+    merged["inputs_sha256"] = inputs_sha256
+    for prim, g in merged["garments"].items():
+        parts = [p["garments"][prim] for p in provs]
+        g["frames"] = sum(int(x["frames"]) for x in parts)
+        for key in ("postprocess_moved",):
+            if key in g:
+                g[key] = sum(int(x.get(key, 0)) for x in parts)
+        for key in ("max_displacement_mm", "max_offset_mm"):
+            if key in g:
+                g[key] = max(float(x.get(key, 0.0)) for x in parts)
+    return stitch_layers(output, chunks, provenance={"cloth_usd": merged}, force=force)
 
 
 def _garment_provenance(r: GarmentReport) -> dict:
     out = {"tier": r.tier.value, "vertices": r.vertices, "frames": r.frames,
-           "mean_body_distance_mm": round(r.mean_body_distance_mm, 3)}
+           "mean_body_distance_mm": round(r.mean_body_distance_mm, 3),
+           "max_displacement_mm": round(r.max_displacement_mm, 3)}
     if r.fit is None:
         out["fit"] = "not computed (skinning tier)"
     else:  # a string of numbers: VtDictionary keeps no plain list of floats
         out.update(fit=" ".join(f"{a:.6g}" for a in r.fit), model_bundle=r.bundle,
-                   postprocess_moved=r.postprocess_moved)
+                   postprocess_moved=r.postprocess_moved, max_offset_mm=round(r.max_offset_mm, 3))
     return out
 
 
@@ -308,7 +647,7 @@ def _provenance(scene: Scene, frange: FrameRange, bodies: dict[str, BodyModel],
         "cloth_usd": {
             "tool_version": __version__,
             "source_layer": scene.stage.identifier,
-            "frame_range": f"{frange.start:g}:{frange.end:g}:{frange.step:g}",
+            "frame_range": str(frange),
             "body_models": {g: {"file": Path(b.source).name, "sha256": b.sha256}
                             for g, b in bodies.items()},
             "model_bundle": bundle,

@@ -2,25 +2,30 @@
 
 The cache layer holds only ``over`` specs at garment prim paths with time-sampled
 ``points`` and ``extent``. Layers are written to a temporary file beside the target and
-renamed into place, so a crash never leaves a partial file; an existing file is only
-replaced with ``force``; a layer the source stage uses is never a target.
+renamed into place, so a crash never leaves a partial file (a process killed mid-write
+leaves only its temporary file, which :func:`remove_stale_temps` clears); an existing
+file is only replaced with ``force``; a layer the source stage uses is never a target.
+Frame-chunk caches of one bake are joined into one layer by :func:`stitch_layers`.
 """
 
 from __future__ import annotations
 
 import logging
 import os
+import re
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping
+from typing import Any, Iterable, Mapping, Sequence
 
 import numpy as np
-from pxr import Sdf, Vt
+from pxr import Sdf, Tf, Vt
 
 from ..core.scene import StageInfo
 from ..errors import ArgumentError, OutputExistsError
 
-__all__ = ["CacheLayerWriter", "write_shot_layer", "check_output_path"]
+__all__ = ["CacheLayerWriter", "CacheInfo", "write_shot_layer", "check_output_path", "cache_layer_info",
+           "stitch_layers", "remove_stale_temps"]
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +63,29 @@ def _temp_path(path: Path) -> Path:
     os.close(fd)
     os.unlink(tmp)  # Sdf creates the file itself
     return Path(tmp)
+
+
+def remove_stale_temps(path: str | Path) -> list[Path]:
+    """Remove the temporary files that writes of ``path`` left behind when killed.
+
+    Only call this while no other process is writing ``path``: a live write's
+    temporary file looks the same.
+
+    Returns:
+        The files removed.
+    """
+    path = Path(path)
+    # tempfile.mkstemp puts 8 random characters between prefix and suffix.
+    pattern = re.compile(rf"^\.{re.escape(path.stem)}\.[A-Za-z0-9_]{{8}}\.tmp{re.escape(path.suffix)}$")
+    removed = []
+    if path.parent.is_dir():
+        for entry in path.parent.iterdir():
+            if pattern.match(entry.name) and entry.is_file():
+                entry.unlink(missing_ok=True)
+                removed.append(entry)
+    if removed:
+        log.info("removed %d stale temporary file(s) of %s", len(removed), path)
+    return removed
 
 
 def _commit(layer: Sdf.Layer, tmp: Path, path: Path, force: bool) -> None:
@@ -174,3 +202,106 @@ def write_shot_layer(path: str | Path, *, cache: str | Path, scene: str | Path, 
         tmp.unlink(missing_ok=True)
         raise
     return path
+
+
+@dataclass(frozen=True)
+class CacheInfo:
+    """What a cache layer on disk says about itself (:func:`cache_layer_info`)."""
+
+    provenance: dict
+    """Its ``customLayerData``."""
+    start: float
+    """``startTimeCode``."""
+    end: float
+    """``endTimeCode``."""
+    samples: dict[str, int]
+    """Number of time samples per attribute path (``/Char/Shirt.points``)."""
+
+
+def cache_layer_info(path: str | Path) -> CacheInfo | None:
+    """Read a cache layer's metadata and time-sample counts; None when it is missing or
+    not a readable USD layer (a truncated or foreign file)."""
+    if not Path(path).is_file():
+        return None
+    try:
+        layer = Sdf.Layer.OpenAsAnonymous(str(path))  # never the registry's cached copy
+    except Tf.ErrorException:
+        return None
+    if layer is None:
+        return None
+    samples: dict[str, int] = {}
+
+    def visit(spec_path: Sdf.Path) -> None:
+        if spec_path.IsPropertyPath():
+            samples[str(spec_path)] = layer.GetNumTimeSamplesForPath(spec_path)
+
+    layer.Traverse(Sdf.Path.absoluteRootPath, visit)
+    return CacheInfo(provenance=dict(layer.customLayerData), start=float(layer.startTimeCode),
+                     end=float(layer.endTimeCode), samples=samples)
+
+
+def stitch_layers(path: str | Path, sources: Sequence[str | Path], *, provenance: Mapping[str, Any],
+                  force: bool = False, protected: Iterable[str] = ()) -> Path:
+    """Join cache layers that hold different time codes of the same prims into one layer.
+
+    Specs become ``over``s at the same paths, every time sample is copied as it is (no
+    resampling), layer metadata comes from the first source, and the time range spans
+    all of them. Written to a temporary file and renamed into place.
+
+    Args:
+        sources: cache layers in time order (frame chunks of one bake).
+        provenance: the joined layer's ``customLayerData``.
+    Raises:
+        ArgumentError: no sources, or a source that is not a readable layer.
+    """
+    path = check_output_path(path, force=force, protected=protected)
+    if not sources:
+        raise ArgumentError(f"{path}: no chunk layers to stitch")
+    layers = []
+    for src in sources:
+        try:
+            layer = Sdf.Layer.OpenAsAnonymous(str(src))
+        except Tf.ErrorException:
+            layer = None
+        if layer is None:
+            raise ArgumentError(f"{src}: not a readable USD layer; cannot stitch it into {path}")
+        layers.append(layer)
+    tmp = _temp_path(path)
+    out = Sdf.Layer.CreateNew(str(tmp))
+    try:
+        first = layers[0]
+        out.timeCodesPerSecond = first.timeCodesPerSecond
+        out.framesPerSecond = first.framesPerSecond
+        out.startTimeCode = min(layer.startTimeCode for layer in layers)
+        out.endTimeCode = max(layer.endTimeCode for layer in layers)
+        for key in ("upAxis", "metersPerUnit"):
+            if first.pseudoRoot.HasInfo(key):
+                out.pseudoRoot.SetInfo(key, first.pseudoRoot.GetInfo(key))
+        for layer in layers:
+            _copy_time_samples(layer, out)
+        out.customLayerData = dict(provenance)
+        _commit(out, tmp, path, force)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+    log.info("stitched %d layers into %s", len(layers), path)
+    return path
+
+
+def _copy_time_samples(src: Sdf.Layer, dst: Sdf.Layer) -> None:
+    """Every attribute's time samples of ``src`` into ``dst``, creating ``over`` specs.
+
+    Values from a ``.usdc`` source are memory-mapped arrays: the copy shares them until
+    ``dst`` is saved.
+    """
+    attrs: list[Sdf.Path] = []
+    src.Traverse(Sdf.Path.absoluteRootPath, lambda p: attrs.append(p) if p.IsPropertyPath() else None)
+    for attr in attrs:
+        spec = src.GetAttributeAtPath(attr)
+        if spec is None:  # a relationship
+            continue
+        if dst.GetAttributeAtPath(attr) is None:
+            prim = Sdf.CreatePrimInLayer(dst, attr.GetPrimPath())
+            Sdf.AttributeSpec(prim, attr.name, spec.typeName)
+        for t in src.ListTimeSamplesForPath(attr):
+            dst.SetTimeSample(attr, t, src.QueryTimeSample(attr, t))

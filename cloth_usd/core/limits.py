@@ -1,0 +1,139 @@
+"""The range of bodies and poses cloth_usd's models were trained on, and checks against it.
+
+Training motions (``cloth_usd.datagen``) keep every joint inside :data:`JOINT_LIMITS`
+and training bodies keep ``|beta| <= BETA_LIMIT``. Inputs outside still bake, but the
+result is an extrapolation, so the bake warns. Shape letters: T frames, J joints (24).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from .smpl import JOINT_NAMES, NUM_JOINTS
+
+__all__ = ["BETA_LIMIT", "EULER_ORDERS", "JOINT_LIMITS", "PoseOutlier", "betas_outside", "pose_outliers",
+           "poses_to_euler"]
+
+#: Largest ``|beta|`` of the bodies the models were trained on (SMPL's shape space is
+#: a PCA in standard deviations; beyond 3 the bodies are implausible).
+BETA_LIMIT = 3.0
+
+#: Intrinsic Euler order of each joint's angles (scipy's upper-case convention). The middle
+#: angle of each order stays inside (-90, 90) deg in :data:`JOINT_LIMITS`, so angles read
+#: back from a rotation are unique.
+EULER_ORDERS: tuple[str, ...] = tuple("YXZ" if name.endswith("_elbow") else "XYZ" for name in JOINT_NAMES)
+
+_J = {name: i for i, name in enumerate(JOINT_NAMES)}
+
+#: Plausible human ranges per joint, intrinsic Euler angles [deg] for the LEFT side and
+#: the midline; right joints are the mirror image (x kept, y and z negated and swapped).
+_LIMITS_DEG: dict[str, tuple[tuple[float, float], ...]] = {
+    "pelvis": ((-30, 30), (-45, 45), (-20, 20)),  # global orientation (dance sway only)
+    "spine1": ((-20, 45), (-30, 30), (-25, 25)),  # +x bends forward, y twists, z bends sideways
+    "spine2": ((-20, 45), (-30, 30), (-25, 25)),
+    "spine3": ((-20, 45), (-30, 30), (-25, 25)),
+    "neck": ((-30, 40), (-45, 45), (-30, 30)),
+    "head": ((-30, 40), (-40, 40), (-30, 30)),
+    "left_hip": ((-120, 30), (-45, 45), (-30, 50)),  # -x flexes forward, +z abducts
+    "left_knee": ((0, 140), (-5, 5), (-5, 5)),  # +x flexes
+    "left_ankle": ((-25, 50), (-20, 20), (-25, 25)),  # +x points the toes down
+    "left_foot": ((-45, 30), (-5, 5), (-5, 5)),
+    "left_collar": ((-15, 15), (-20, 20), (-15, 30)),  # +z shrugs
+    "left_shoulder": ((-90, 90), (-85, 40), (-90, 90)),  # -z lowers the arm, +z raises it
+    "left_elbow": ((-60, 60), (-150, 5), (-5, 5)),  # -y flexes the forearm forward
+    "left_wrist": ((-60, 60), (-30, 30), (-70, 70)),
+    "left_hand": ((-15, 15), (-15, 15), (-40, 15)),
+}
+
+
+def _limits_table() -> np.ndarray:
+    lim = np.zeros((NUM_JOINTS, 3, 2))
+    for name, rows in _LIMITS_DEG.items():
+        lim[_J[name]] = rows
+        if name.startswith("left_"):
+            mirror = np.array(rows, dtype=np.float64)
+            mirror[1:] = -mirror[1:, ::-1]
+            lim[_J["right_" + name[5:]]] = mirror
+    lim = np.deg2rad(lim)
+    lim.setflags(write=False)
+    return lim
+
+
+#: (24, 3, 2) [rad]: per joint and per Euler angle about x, y, z (in the joint's
+#: :data:`EULER_ORDERS`), the (low, high) bounds of plausible human motion. Every range
+#: contains 0 (the rest pose).
+JOINT_LIMITS: np.ndarray = _limits_table()
+
+
+def poses_to_euler(poses: np.ndarray) -> np.ndarray:
+    """Per-joint Euler angles in :data:`EULER_ORDERS`.
+
+    Args:
+        poses: (T, 72) axis-angle [rad].
+    Returns:
+        (T, 24, 3) angles about x, y, z [rad] (indexed by axis, not by order).
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    rot = poses.reshape(len(poses), NUM_JOINTS, 3)
+    out = np.empty_like(rot)
+    for order in sorted(set(EULER_ORDERS)):
+        joints = [j for j, o in enumerate(EULER_ORDERS) if o == order]
+        angles = Rotation.from_rotvec(rot[:, joints].reshape(-1, 3)).as_euler(order)
+        by_axis = np.argsort(["XYZ".index(a) for a in order])
+        out[:, joints] = angles.reshape(len(poses), len(joints), 3)[..., by_axis]
+    return out
+
+
+def betas_outside(betas: np.ndarray, limit: float = BETA_LIMIT) -> np.ndarray:
+    """Indices of the shape coefficients with ``|beta| > limit``.
+
+    Args:
+        betas: (B,) float shape coefficients.
+    Returns:
+        (K,) int64 indices into ``betas``.
+    """
+    return np.flatnonzero(np.abs(np.asarray(betas, dtype=np.float64)) > limit)
+
+
+@dataclass(frozen=True)
+class PoseOutlier:
+    """Frames whose pose leaves :data:`JOINT_LIMITS` (the root orientation is free)."""
+
+    frames: np.ndarray
+    """(K,) int64 indices of the frames outside, ascending."""
+    joint: str
+    """The joint furthest outside at the first such frame."""
+    axis: str
+    """``x``, ``y`` or ``z``: its Euler angle that is outside."""
+    angle_deg: float
+    """That angle [deg]."""
+    low_deg: float
+    """The trained range of that angle [deg], low end."""
+    high_deg: float
+    """High end [deg]."""
+
+
+def pose_outliers(poses: np.ndarray, margin_deg: float = 10.0) -> PoseOutlier | None:
+    """The frames where some joint (not the root) is more than ``margin_deg`` outside its limits.
+
+    Args:
+        poses: (T, 72) axis-angle [rad], SMPL's (root first).
+    Returns:
+        None when every frame is inside.
+    """
+    euler = poses_to_euler(poses)[:, 1:]  # (T, 23, 3); the root turns freely
+    lim = JOINT_LIMITS[1:]
+    excess = np.maximum(euler - lim[..., 1], lim[..., 0] - euler)  # (T, 23, 3) [rad], > 0 outside
+    outside = excess > np.deg2rad(margin_deg)
+    frames = np.flatnonzero(outside.any(axis=(1, 2)))
+    if frames.size == 0:
+        return None
+    first = frames[0]
+    joint, axis = np.unravel_index(int(np.argmax(excess[first])), excess[first].shape)
+    low, high = np.rad2deg(lim[joint, axis])
+    return PoseOutlier(frames=frames.astype(np.int64), joint=JOINT_NAMES[joint + 1], axis="xyz"[axis],
+                       angle_deg=float(np.rad2deg(euler[first, joint, axis])), low_deg=float(low),
+                       high_deg=float(high))
