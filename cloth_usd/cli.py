@@ -47,24 +47,84 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("-o", "--output", required=True, help="folder for shards, manifest.json and fit.npz")
     g.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
 
+    bt = sub.add_parser("batch", help="bake many jobs (a job file, stage list or globs) in workers or on Ray")
+    bt.add_argument("jobs", nargs="+", metavar="JOBS",
+                    help="JOBS.toml / JOBS.json (a list of jobs), STAGES.txt (one stage a line), stages or globs")
+    bt.add_argument("--out-dir", help="folder for outputs a job does not name (default: beside each stage)")
+    bt.add_argument("--frames", help="START:END[:STEP] for jobs that give none (default: each stage's range)")
+    bt.add_argument("--garment", action="append", metavar="PRIM", help="garment for jobs that name none (repeatable)")
+    bt.add_argument("--tier", help="tier for jobs that give none: skinning, coarse, detail")
+    bt.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
+    bt.add_argument("--models", metavar="DIR", help="model bundle folder for jobs that give none")
+    bt.add_argument("--executor", default="local", choices=["local", "ray"],
+                    help="local worker processes (default) or Ray (pip install 'cloth-usd[ray]')")
+    bt.add_argument("--address", help="Ray cluster to join (default: start a local Ray)")
+    bt.add_argument("--workers", type=int, help="parallel tasks (default: the CPU count)")
+    bt.add_argument("--retries", type=int, default=2, help="re-runs of a task whose worker died (default 2)")
+    bt.add_argument("--chunk-frames", type=int, metavar="N",
+                    help="bake longer jobs in parallel chunks of N frames, stitched into one cache")
+    bt.add_argument("--job-timeout", type=float, metavar="SECONDS", help="kill and retry a task running longer")
+    bt.add_argument("--force", action="store_true", help="bake every job, even those up to date")
+    bt.add_argument("--report", metavar="JSON", help="also write a machine-readable report")
+    bt.add_argument("--dry-run", action="store_true",
+                    help="list each job's `cloth-usd bake` command (for a farm scheduler); bake nothing")
+
     r = sub.add_parser("render", help="draw body and garments at some frames to a PNG (a preview)")
-    r.add_argument("scene", help="USD stage or shot layer to read")
+    r.add_argument("scene", help="USD stage or shot layer to read, or a data set shard (.npz)")
     r.add_argument("-o", "--output", required=True, help="PNG to write")
-    r.add_argument("--frames", required=True, help="comma-separated time codes, e.g. 1001,1030,1060")
+    r.add_argument("--frames", required=True,
+                   help="comma-separated time codes, e.g. 1001,1030,1060 (frame indices for a shard)")
     r.add_argument("--view", default="three-quarter", help="front, side or three-quarter")
     r.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
+
+    tr = sub.add_parser("train", help="train the coarse or detail generator on a datagen data set")
+    tr.add_argument("tier", choices=["coarse", "detail"], help="which generator")
+    tr.add_argument("--data", required=True, help="data set folder (cloth-usd datagen)")
+    tr.add_argument("-o", "--out", required=True, help="run folder: checkpoints, history.csv, curve.png")
+    tr.add_argument("--config", help="training config (.json or .toml; see cloth_usd.nn.train.TrainConfig)")
+    tr.add_argument("--coarse-run", help="detail: the trained coarse run folder (its predictions are M_coarse)")
+    tr.add_argument("--device", default="auto", help="auto (default: cuda when available), cpu or cuda")
+    tr.add_argument("--epochs", type=int, help="total epochs (overrides the config; also when resuming)")
+    tr.add_argument("--resume", action="store_true", help="continue the run in --out after its last epoch")
+    tr.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
+    tr.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
+
+    ex = sub.add_parser("export", help="export trained runs to ONNX and write a verified model bundle")
+    ex.add_argument("--coarse-run", required=True, help="trained coarse run folder")
+    ex.add_argument("--detail-run", help="trained detail run folder (optional)")
+    ex.add_argument("--data", required=True, help="the data set the runs were trained on (fit.npz, manifest)")
+    ex.add_argument("-o", "--out", required=True, help="bundle folder to write")
+    ex.add_argument("--name", required=True, help="bundle name, recorded in every cache it bakes")
+    ex.add_argument("--category", default="tshirt", help="garment category (default tshirt)")
+    ex.add_argument("--metrics", help="metrics.json of cloth-usd evaluate, recorded in the manifest")
+    ex.add_argument("--description", default="", help="one line about the training data")
+    ex.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
+    ex.add_argument("--force", action="store_true", help="write into a non-empty folder")
+
+    ev = sub.add_parser("evaluate", help="per-vertex error of a bundle (and ablation runs) on the test splits")
+    ev.add_argument("--data", required=True, help="data set folder (cloth-usd datagen)")
+    ev.add_argument("--bundle", required=True, help="model bundle folder")
+    ev.add_argument("--ablation-runs", nargs="+", default=[], metavar="RUN",
+                    help="training runs evaluated with torch (detail runs on the bundle's coarse model)")
+    ev.add_argument("-o", "--out", required=True, help="report folder: report.md, metrics.json, PNGs")
+    ev.add_argument("--max-frames", type=int, help="only the first frames of every sequence")
+    ev.add_argument("--device", default="cpu", help="torch device of the ablation runs: cpu (default), cuda, auto")
+    ev.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
     return p
 
 
 def _render(args: argparse.Namespace) -> int:
     from .errors import ArgumentError
-    from .render import render_frames
+    from .render import render_frames, render_shard
 
+    shard = args.scene.endswith(".npz")
     try:
-        frames = [float(f) for f in args.frames.split(",")]
+        frames = [(int if shard else float)(f) for f in args.frames.split(",")]
     except ValueError:
-        raise ArgumentError(f"--frames '{args.frames}': expected comma-separated time codes") from None
-    out = render_frames(args.scene, frames, args.output, body_model=args.body_model, view=args.view)
+        raise ArgumentError(f"--frames '{args.frames}': expected comma-separated "
+                            f"{'frame indices' if shard else 'time codes'}") from None
+    draw = render_shard if shard else render_frames
+    out = draw(args.scene, frames, args.output, body_model=args.body_model, view=args.view)
     sys.stdout.write(f"wrote {out}\n")
     return 0
 
@@ -106,6 +166,29 @@ def _bake(args: argparse.Namespace) -> int:
     return 0
 
 
+def _batch(args: argparse.Namespace) -> int:
+    from .batch import describe_jobs, load_jobs, run_batch
+
+    jobs = load_jobs(args.jobs, out_dir=args.out_dir, frames=args.frames, garments=args.garment, tier=args.tier,
+                     models=args.models, body_model=args.body_model)
+    if args.dry_run:
+        sys.stdout.write("".join(line + "\n" for line in describe_jobs(jobs)))
+        return 0
+
+    def show(job) -> None:
+        detail = job.error if job.error else f"{job.frames} frames, {job.seconds:.1f} s"
+        sys.stdout.write(f"{job.status.value:8s} {job.name}: {detail}\n")
+        sys.stdout.flush()
+
+    report = run_batch(jobs, executor=args.executor, workers=args.workers, retries=args.retries,
+                       chunk_frames=args.chunk_frames, force=args.force, address=args.address,
+                       job_timeout=args.job_timeout, on_job=show)
+    sys.stdout.write("".join(line + "\n" for line in report.summary()))
+    if args.report:
+        sys.stdout.write(f"report: {report.write(args.report)}\n")
+    return 1 if report.failed else 0
+
+
 def _doctor(args: argparse.Namespace) -> int:
     from .doctor import run_checks
 
@@ -116,14 +199,80 @@ def _doctor(args: argparse.Namespace) -> int:
     return 0 if all(c.ok for c in checks) else 1
 
 
+def _body(path: str | None):
+    from .core.body import load_body_model
+
+    return load_body_model(path) if path else None
+
+
+def _train(args: argparse.Namespace) -> int:
+    from .nn.train import load_train_config, resume_settings, train
+
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+    config_path, coarse_run = args.config, args.coarse_run
+    if args.resume and (config_path is None or coarse_run is None):
+        config, prior_coarse = resume_settings(args.out, epochs=args.epochs)
+        coarse_run = coarse_run or prior_coarse
+    if config_path is not None or not args.resume:
+        config = load_train_config(config_path, epochs=args.epochs)
+
+    def show(r) -> None:
+        sys.stdout.write(f"epoch {r.epoch + 1}/{config.epochs}: train {r.train_loss:.4g}, val {r.val_loss:.4g} "
+                         f"({r.val_mm:.3f} mm), {r.seconds:.1f} s\n")
+        sys.stdout.flush()
+
+    result = train(args.tier, args.data, args.out, config, coarse_run=coarse_run, device=args.device,
+                   resume=args.resume, body=_body(args.body_model), progress=show)
+    best = next((r for r in result.history if r.epoch == result.best_epoch), result.history[-1])
+    sys.stdout.write(f"{args.tier}: best epoch {result.best_epoch + 1} (val {best.val_mm:.3f} mm); "
+                     f"run in {result.run_dir} (best.pt, history.csv, curve.png)\n")
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    from .errors import ArgumentError
+    from .nn.export import export_bundle
+
+    metrics = None
+    if args.metrics:
+        try:
+            metrics = json.loads(Path(args.metrics).read_text())
+        except (OSError, ValueError) as exc:
+            raise ArgumentError(f"--metrics {args.metrics}: unreadable ({exc})") from exc
+    out = export_bundle(args.coarse_run, args.detail_run, args.data, args.out, name=args.name,
+                        category=args.category, metrics=metrics, description=args.description,
+                        force=args.force, body=_body(args.body_model))
+    sys.stdout.write(f"wrote bundle {out} (ONNX checked against torch on the validation data)\n")
+    return 0
+
+
+def _evaluate(args: argparse.Namespace) -> int:
+    from .evaluate import evaluate_bundle
+
+    report = evaluate_bundle(args.data, args.bundle, args.out, ablation_runs=args.ablation_runs,
+                             body=_body(args.body_model), max_frames=args.max_frames, device=args.device)
+    for row in report.rows:
+        cells = ", ".join(f"{t} {row['mean_mm'][t]:.2f}" for t in report.tiers)
+        sys.stdout.write(f"{row['title']}: {cells} mm\n")
+    sys.stdout.write(f"wrote {report.out_dir}/report.md, metrics.json, histograms.png, means.png\n")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the process exit code."""
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="cloth-usd: %(levelname)s: %(message)s")
     try:
-        commands = {"inspect": _inspect, "bake": _bake, "doctor": _doctor, "render": _render,
-                    "datagen": _datagen}
+        commands = {"inspect": _inspect, "bake": _bake, "doctor": _doctor, "render": _render, "batch": _batch,
+                    "datagen": _datagen,
+                    "train": _train, "export": _export, "evaluate": _evaluate}
         return commands[args.command](args)
     except ClothUsdError as exc:
         if args.verbose:

@@ -1,5 +1,9 @@
 """Torch networks of the learned tiers (training and export only; inference runs the
-exported ONNX models through :mod:`cloth_usd.runtime`, without torch)."""
+exported ONNX models through :mod:`cloth_usd.runtime`, without torch).
+
+Training: :func:`cloth_usd.nn.train.train` (``cloth-usd train``) on data from
+:mod:`cloth_usd.nn.data`; bundles: :func:`cloth_usd.nn.export.export_bundle`
+(``cloth-usd export``)."""
 
 from .layers import GATBlock, gather_nodes, masked_softmax, pool_mean, unpool
 from .models import (
@@ -15,13 +19,17 @@ from .models import (
 __all__ = [
     "GATBlock", "gather_nodes", "masked_softmax", "pool_mean", "unpool",
     "AttributeParser", "CoarseConfig", "CoarseGenerator", "DetailConfig", "DetailGenerator",
-    "DisplacementHead", "ParserConfig", "export_coarse", "export_detail",
+    "DisplacementHead", "ParserConfig", "export_coarse", "export_detail", "export_bundle",
+    "TrainConfig", "load_run",
 ]
+
+_LAZY = {"export_coarse": "export", "export_detail": "export", "export_bundle": "export",
+         "TrainConfig": "train", "load_run": "train"}
 
 
 def __getattr__(name: str):
-    if name in ("export_coarse", "export_detail"):
-        from . import export
+    if name in _LAZY:
+        import importlib
 
-        return getattr(export, name)
+        return getattr(importlib.import_module(f".{_LAZY[name]}", __name__), name)
     raise AttributeError(f"module 'cloth_usd.nn' has no attribute {name!r}")

@@ -5,6 +5,10 @@ dynamic: batch B, vertices N, neighbours K, pooled clusters N2, members P, poole
 neighbours K2, so one exported file serves every garment topology. Example inputs are
 built on a small synthetic grid whose dimensions are all distinct and > 1 (the exporter
 specialises dimensions that equal 0, 1 or each other in the example).
+
+:func:`export_bundle` (``cloth-usd export``) exports trained runs, checks the ONNX files
+against the torch models through the runtime's pipeline on the validation data, and writes
+a model bundle (:func:`cloth_usd.runtime.bundle.write_bundle`).
 """
 
 from __future__ import annotations
@@ -18,7 +22,7 @@ from ..core.graph import build_graph
 from ..runtime.io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT, detail_inputs
 from .models import ATTRIBUTE_FEATURES, CoarseGenerator, DetailGenerator
 
-__all__ = ["OPSET", "export_coarse", "export_detail"]
+__all__ = ["OPSET", "export_coarse", "export_detail", "export_bundle"]
 
 OPSET = 18
 
@@ -77,3 +81,156 @@ def export_detail(model: DetailGenerator, path: str | Path) -> Path:
     """
     example, _ = _example(model)
     return _export(model, DETAIL_INPUTS, Path(path), example)
+
+
+def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | None, clips, body,
+            frames: int) -> dict:
+    """Largest point difference [m] between the torch models and their ONNX files, through
+    the runtime's pipeline (:func:`cloth_usd.core.pipeline.run_tiers`), on ``clips``."""
+    from ..core.pipeline import run_tiers
+    from ..runtime.io import coarse_inputs, detail_inputs
+    from ..runtime.session import ModelSession
+    from .train import torch_coarse_fn, torch_detail_fn
+
+    sessions = {"coarse": ModelSession(coarse_onnx, prefer_gpu=False)}
+    if detail_onnx is not None:
+        sessions["detail"] = ModelSession(detail_onnx, prefer_gpu=False)
+
+    def onnx_coarse(feats, graph):
+        return sessions["coarse"].run(coarse_inputs(feats, graph.table))[OUTPUT]
+
+    def onnx_detail(feats, attrs, graph):
+        return sessions["detail"].run(detail_inputs(feats, attrs, graph))[OUTPUT]
+
+    t_coarse = torch_coarse_fn(coarse_torch)
+    t_detail = torch_detail_fn(detail_torch) if detail_torch is not None else None
+    worst = {"coarse": 0.0, "detail": 0.0}
+    used = 0
+    for clip in clips:
+        k = min(frames, clip.num_frames)
+        poses, transl = clip.poses[:k], clip.transl[:k]
+        used += k
+        for tier in worst:
+            if tier == "detail" and t_detail is None:
+                continue
+            want, _ = run_tiers(body, clip.pair, poses, transl, t_coarse, t_detail if tier == "detail" else None)
+            got, _ = run_tiers(body, clip.pair, poses, transl, onnx_coarse,
+                               onnx_detail if tier == "detail" else None)
+            worst[tier] = max(worst[tier], float(np.abs(got - want).max()))
+    return {"coarse_max_m": worst["coarse"], "detail_max_m": worst["detail"] if t_detail is not None else None,
+            "sequences": len(clips), "frames": used}
+
+
+def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_dir: str | Path,
+                  out_dir: str | Path, *, name: str, category: str = "tshirt",
+                  metrics: dict | None = None, description: str = "", parity_frames: int = 4,
+                  tolerance: float = 1e-4, force: bool = False, body=None) -> Path:
+    """Export trained runs to ONNX and write a verified model bundle.
+
+    The best-validation model of each run is exported (:func:`export_coarse`,
+    :func:`export_detail`); before the bundle is written, the ONNX files are run through
+    the runtime's pipeline on the first ``parity_frames`` frames of every validation
+    sequence and must match the torch models within ``tolerance`` [m].
+
+    Args:
+        coarse_run, detail_run: training run folders (detail optional).
+        data_dir: the data set both were trained on (its ``fit.npz`` ships in the bundle,
+            the sha256 of its ``manifest.json`` is recorded).
+        out_dir: the bundle folder (see :func:`cloth_usd.runtime.bundle.write_bundle`).
+        name, category: the bundle's name and garment category.
+        metrics: evaluation metrics (``cloth-usd evaluate``'s ``metrics.json``) to record.
+        description: one line about the training data.
+    Returns:
+        The bundle folder, loaded once through :func:`cloth_usd.runtime.load_bundle`.
+    Raises:
+        ArgumentError: runs of the wrong tier, trained on other data, or a detail run
+            trained on another coarse model.
+        ClothUsdError: the ONNX files do not match the torch models.
+    """
+    import dataclasses
+    import json
+    import logging
+    import tempfile
+
+    from ..core.files import file_sha256
+    from ..errors import ArgumentError, ClothUsdError
+    from ..runtime.bundle import load_bundle, write_bundle
+    from .data import FIT, Split, load_dataset
+    from .train import BEST, CoarseInput, Tier, load_run
+
+    log = logging.getLogger(__name__)
+    data_dir = Path(data_dir)
+    coarse = load_run(coarse_run)
+    detail = load_run(detail_run) if detail_run is not None else None
+    if coarse.tier is not Tier.COARSE:
+        raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run")
+    if detail is not None and detail.tier is not Tier.DETAIL:
+        raise ArgumentError(f"--detail-run {detail_run}: is a {detail.tier.value} run")
+    data = load_dataset(data_dir, (Split.VAL,), body=body, max_frames=parity_frames)
+    for run in (coarse, detail):
+        if run is not None and run.info["data"]["manifest_sha256"] != data.manifest_sha256:
+            raise ArgumentError(f"{run.path}: trained on another data set than {data_dir} (manifest sha256 "
+                                f"{run.info['data']['manifest_sha256'][:12]}... vs {data.manifest_sha256[:12]}...)")
+    if detail is not None:
+        used = (detail.info.get("coarse_run") or {}).get("best_sha256")
+        if used != file_sha256(coarse.path / BEST):
+            msg = (f"--detail-run {detail.path} was trained on another coarse model "
+                   f"({(detail.info.get('coarse_run') or {}).get('path')}) than {coarse.path}")
+            if detail.config.coarse_input is CoarseInput.PREDICTED:
+                raise ArgumentError(msg)
+            log.warning("%s", msg)
+    clips = data.split(Split.VAL)
+    if not clips:
+        raise ArgumentError(f"--data {data_dir}: no validation sequences for the export parity check")
+
+    def train_record(run) -> dict:
+        return {**dataclasses.asdict(run.model.config), "train": {
+            "config": run.info["config"], "best_epoch": run.epoch, "best_sha256": file_sha256(run.path / BEST),
+            "run": str(run.path.resolve())}}
+
+    def history(run) -> dict:
+        rows = json.loads((run.path / "history.json").read_text())
+        best = next((r for r in rows if r["epoch"] == run.epoch), rows[-1])
+        return {"best_epoch": run.epoch, "val_mm": best["val_mm"], "val_loss": best["val_loss"],
+                "epochs": len(rows)}
+
+    with tempfile.TemporaryDirectory(prefix="cloth-usd-export-") as tmp:
+        tmp = Path(tmp)
+        coarse_path = export_coarse(coarse.model, tmp / "coarse.onnx")
+        detail_path = export_detail(detail.model, tmp / "detail.onnx") if detail is not None else None
+        parity = _parity(coarse.model, detail.model if detail else None, coarse_path, detail_path, clips,
+                         data.body, parity_frames)
+        worst = max(v for v in (parity["coarse_max_m"], parity["detail_max_m"]) if v is not None)
+        if not worst <= tolerance:
+            raise ClothUsdError(f"export parity failed: ONNX and torch differ by {worst * 1000:.4f} mm on the "
+                                f"validation data (tolerance {tolerance * 1000:.4f} mm); nothing was written")
+        configs = {"coarse": train_record(coarse)}
+        if detail is not None:
+            configs["detail"] = train_record(detail)
+        summary = {"export_parity": parity,
+                   "validation": {"coarse": history(coarse), **({"detail": history(detail)} if detail else {})}}
+        if metrics:
+            summary["evaluation"] = _check_evaluated(metrics, coarse_path, detail_path, log)
+        n_train = coarse.info["data"].get("train_sequences")
+        training = {"manifest_sha256": data.manifest_sha256,
+                    "description": description or f"{n_train} training sequences of {data_dir.name}"}
+        out = write_bundle(out_dir, name=name, category=category, coarse_onnx=coarse_path,
+                           detail_onnx=detail_path, fit_npz=data_dir / FIT, configs=configs,
+                           training_data=training, metrics=summary, opset=OPSET, force=force)
+    load_bundle(out)
+    return out
+
+
+def _check_evaluated(metrics: dict, coarse_onnx: Path, detail_onnx: Path | None, log) -> dict:
+    """The evaluation metrics, marked whether they were measured on these very ONNX files."""
+    from ..core.files import file_sha256
+
+    files = (metrics.get("bundle") or {}).get("files", {})
+    now = {"coarse.onnx": file_sha256(coarse_onnx)}
+    if detail_onnx is not None:
+        now["detail.onnx"] = file_sha256(detail_onnx)
+    same = all(files.get(k) == v for k, v in now.items())
+    if not same:
+        log.warning("the evaluation metrics were measured on other model files than the ones exported now "
+                    "(sha256 differ); they are recorded with same_models=false")
+    return {**metrics, "same_models": same}

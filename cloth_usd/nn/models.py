@@ -271,6 +271,16 @@ class DetailGenerator(_Normalised):
         fc = tuple(_scaled(w, c.width) for w in c.fc_widths)
         self.head = DisplacementHead(widths[3], fc, decompose=c.decompose)
 
+    def set_attribute_statistics(self, mean: torch.Tensor, std: torch.Tensor) -> None:
+        """Store the (85,) attribute mean and std: the parser's input normalisation, or that of
+        the attributes appended to every node when there is no parser."""
+        if self.parser is not None:
+            dst_mean, dst_std = self.parser.input_mean, self.parser.input_std
+        else:
+            dst_mean, dst_std = self.attribute_mean, self.attribute_std
+        dst_mean.copy_(torch.as_tensor(mean, dtype=torch.float32))
+        dst_std.copy_(torch.as_tensor(std, dtype=torch.float32))
+
     def forward(self, features: torch.Tensor, attributes: torch.Tensor, nbr: torch.Tensor,
                 mask: torch.Tensor, cluster: torch.Tensor, members: torch.Tensor,
                 members_mask: torch.Tensor, pooled_nbr: torch.Tensor,

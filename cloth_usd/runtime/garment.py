@@ -14,13 +14,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..core.body import BodyModel, lbs, shape_body
-from ..core.features import attributes, coarse_features, detail_features, vertex_normals
-from ..core.fit import pair_distances
-from ..core.graph import MeshGraph, build_graph
-from ..core.postprocess import DEFAULT_MARGIN, push_out
+from ..core.body import BodyModel
+from ..core.graph import MeshGraph
+from ..core.pipeline import GarmentPair, prepare_pair, run_tiers
+from ..core.postprocess import DEFAULT_MARGIN
 from ..core.scene import Tier
-from ..core.skinning import SkinBinding, bind_garment
+from ..core.skinning import SkinBinding
 from ..core.smpl import NUM_JOINTS
 from ..errors import ArgumentError, BundleError
 from .bundle import ModelBundle
@@ -58,19 +57,19 @@ class LearnedGarment:
                  margin: float = DEFAULT_MARGIN) -> None:
         self.bundle = bundle
         self.body = body
-        self.betas = np.asarray(betas, dtype=np.float64)
-        self.faces = np.asarray(faces, dtype=np.int64)
         self.margin = float(margin)
-        rest_points = np.asarray(rest_points, dtype=np.float64)
-        self.binding = binding if binding is not None else bind_garment(body, self.betas, rest_points)
-        self.v_shaped, self.joints = shape_body(body, self.betas)
-        self.graph: MeshGraph = build_graph(self.faces, rest_points)
         fit = bundle.fit
         if fit.anchors.size and int(fit.anchors.max()) >= body.num_vertices:
             raise BundleError(f"{bundle.path}: the fit model's anchors index body vertices up to "
                               f"{int(fit.anchors.max())}, but the body model has {body.num_vertices}")
-        d = pair_distances(rest_points, self.binding.association, self.v_shaped, fit.anchors)
-        self.alpha: np.ndarray = np.asarray(fit.transform(d), dtype=np.float64)
+        self.pair: GarmentPair = prepare_pair(body, betas, rest_points, faces, fit, binding=binding)
+        """The pair's association, graph and fit attribute (:mod:`cloth_usd.core.pipeline`)."""
+        self.betas = self.pair.betas
+        self.faces = self.pair.faces
+        self.binding: SkinBinding = self.pair.binding
+        self.v_shaped, self.joints = self.pair.v_shaped, self.pair.joints
+        self.graph: MeshGraph = self.pair.graph
+        self.alpha: np.ndarray = self.pair.alpha
         """(F,) the pair's fit attribute alpha (F = 3)."""
         if self.alpha.shape != (3,):
             raise BundleError(f"{bundle.path}: the fit model has {self.alpha.shape[0]} factors, "
@@ -105,20 +104,14 @@ class LearnedGarment:
             raise ArgumentError(f"poses has {poses.shape[0]} frames, transl {transl.shape[0]}")
         coarse = self.bundle.session(Tier.COARSE)
         detail = self.bundle.session(Tier.DETAIL) if tier is Tier.DETAIL else None
-        idx = self.binding.association.vertex
-        num_t, n = poses.shape[0], self.graph.num_vertices
-        points = np.empty((num_t, n, 3))
-        moved = np.zeros(num_t, dtype=np.int64)
-        for lo in range(0, num_t, batch_size):
-            hi = min(lo + batch_size, num_t)
-            verts, joints = lbs(self.body, self.v_shaped, self.joints, poses[lo:hi], transl[lo:hi])
-            normals = vertex_normals(verts, self.body.faces)
-            body_pts, body_nrm = verts[:, idx], normals[:, idx]
-            feats = coarse_features(verts, normals, idx, transl[lo:hi], self.alpha[0])
-            m = body_pts + coarse.run(coarse_inputs(feats, self.graph.table))[OUTPUT]
-            if detail is not None:
-                feats = detail_features(m, self.faces, joints, transl[lo:hi])
-                attrs = attributes(self.alpha, self.betas, poses[lo:hi])
-                m = m + detail.run(detail_inputs(feats, attrs, self.graph))[OUTPUT]
-            points[lo:hi], moved[lo:hi] = push_out(m, body_pts, body_nrm, margin=self.margin)
+
+        def run_coarse(feats: np.ndarray, graph: MeshGraph) -> np.ndarray:
+            return coarse.run(coarse_inputs(feats, graph.table))[OUTPUT]
+
+        def run_detail(feats: np.ndarray, attrs: np.ndarray, graph: MeshGraph) -> np.ndarray:
+            return detail.run(detail_inputs(feats, attrs, graph))[OUTPUT]
+
+        points, moved = run_tiers(self.body, self.pair, poses, transl, run_coarse,
+                                  run_detail if detail is not None else None, batch_size=batch_size,
+                                  margin=self.margin)
         return LearnedFrames(points=points, moved=moved)

@@ -1,0 +1,175 @@
+"""The learned tiers' pipeline, shared by inference and training (numpy only).
+
+The runtime (:class:`cloth_usd.runtime.LearnedGarment`, ONNX models) and the training
+and evaluation code (``cloth_usd.nn``, torch models) build every model input through
+these functions, so a model is trained on exactly the features it is later run on:
+
+- :func:`prepare_pair`, once per garment-body pair: association (through the skinning
+  binding), the garment graph, the fit attribute alpha;
+- :func:`pose_body`, per batch of frames: the posed body, its normals, and the body
+  point and normal at each garment vertex's associated body vertex;
+- :func:`coarse_model_features` and :func:`detail_model_inputs`: the node features of
+  the two generators (:mod:`cloth_usd.core.features`);
+- :func:`run_tiers`: coarse model -> ``M_coarse`` -> detail model -> ``M_detail`` ->
+  post-process, with the models passed in as callables (an onnxruntime session or a
+  torch module).
+
+Shape letters: T frames, N garment vertices, V body vertices, M triangles, J joints,
+F factors.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+from .body import BodyModel, lbs, shape_body
+from .features import attributes, coarse_features, detail_features, vertex_normals
+from .fit import FitModel, pair_distances
+from .graph import MeshGraph, build_graph
+from .postprocess import DEFAULT_MARGIN, push_out
+from .skinning import SkinBinding, bind_garment
+
+__all__ = ["GarmentPair", "PosedBody", "prepare_pair", "pose_body", "coarse_model_features",
+           "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn"]
+
+#: A coarse model: ``(features (B, N, 7), graph) -> delta (B, N, 3) [m]``.
+CoarseFn = Callable[[np.ndarray, MeshGraph], np.ndarray]
+#: A detail model: ``(features (B, N, 30), attributes (B, 85), graph) -> delta (B, N, 3) [m]``.
+DetailFn = Callable[[np.ndarray, np.ndarray, MeshGraph], np.ndarray]
+
+
+@dataclass(frozen=True)
+class GarmentPair:
+    """What the learned tiers need of one garment-body pair, computed once."""
+
+    betas: np.ndarray
+    """(B',) float64 the body's shape coefficients."""
+    faces: np.ndarray
+    """(M, 3) int64 garment triangles."""
+    binding: SkinBinding
+    """The skinning binding (its association is METHOD.md's ``I``)."""
+    v_shaped: np.ndarray
+    """(V, 3) float64 unposed shaped body [m]."""
+    joints: np.ndarray
+    """(J, 3) float64 its rest joints [m]."""
+    graph: MeshGraph
+    """The garment graph (neighbour table and one pooling level)."""
+    alpha: np.ndarray
+    """(F,) float64 the pair's fit attribute."""
+
+    @property
+    def assoc_vertex(self) -> np.ndarray:
+        """(N,) int64 associated body vertex of each garment vertex."""
+        return self.binding.association.vertex
+
+    @property
+    def num_vertices(self) -> int:
+        """N."""
+        return self.graph.num_vertices
+
+
+@dataclass(frozen=True)
+class PosedBody:
+    """The body posed for a batch of frames, as the models' features need it."""
+
+    vertices: np.ndarray
+    """(T, V, 3) float64 posed body [m], world frame (``transl`` included)."""
+    joints: np.ndarray
+    """(T, J, 3) float64 posed joints [m], same frame."""
+    normals: np.ndarray
+    """(T, V, 3) float64 unit body normals."""
+    garment_points: np.ndarray
+    """(T, N, 3) float64 each garment vertex's associated posed body vertex [m] (``I M_b``)."""
+    garment_normals: np.ndarray
+    """(T, N, 3) float64 the body normals there."""
+
+
+def prepare_pair(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray, faces: np.ndarray,
+                 fit: FitModel, *, binding: SkinBinding | None = None) -> GarmentPair:
+    """Association, graph and fit attribute of one garment-body pair.
+
+    Args:
+        body: the body model.
+        betas: (B',) shape coefficients.
+        rest_points: (N, 3) garment rest points [m], canonical body frame.
+        faces: (M, 3) int garment triangles.
+        fit: the fit attribute's factor-analysis model (its anchors must index ``body``).
+        binding: a skinning binding of the same pair to reuse (made here if None).
+    """
+    betas = np.asarray(betas, dtype=np.float64)
+    rest_points = np.asarray(rest_points, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    binding = binding if binding is not None else bind_garment(body, betas, rest_points)
+    v_shaped, joints = shape_body(body, betas)
+    graph = build_graph(faces, rest_points)
+    d = pair_distances(rest_points, binding.association, v_shaped, fit.anchors)
+    alpha = np.asarray(fit.transform(d), dtype=np.float64)
+    return GarmentPair(betas=betas, faces=faces, binding=binding, v_shaped=v_shaped, joints=joints,
+                       graph=graph, alpha=alpha)
+
+
+def pose_body(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray) -> PosedBody:
+    """Pose the pair's body for a batch of frames.
+
+    Args:
+        poses: (T, 72) axis-angle [rad], canonical body frame.
+        transl: (T, 3) root translation [m].
+    """
+    verts, joints = lbs(body, pair.v_shaped, pair.joints, poses, transl)
+    normals = vertex_normals(verts, body.faces)
+    idx = pair.assoc_vertex
+    return PosedBody(vertices=verts, joints=joints, normals=normals, garment_points=verts[:, idx],
+                     garment_normals=normals[:, idx])
+
+
+def coarse_model_features(pair: GarmentPair, posed: PosedBody, transl: np.ndarray) -> np.ndarray:
+    """(T, N, 7) float64 coarse node features (:func:`~cloth_usd.core.features.coarse_features`)."""
+    return coarse_features(posed.vertices, posed.normals, pair.assoc_vertex, transl, pair.alpha[0])
+
+
+def detail_model_inputs(pair: GarmentPair, coarse_points: np.ndarray, posed: PosedBody, poses: np.ndarray,
+                        transl: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Detail node features on the coarse garment and the parser's attributes.
+
+    Args:
+        coarse_points: (T, N, 3) ``M_coarse`` [m], world frame.
+        poses: (T, 72) axis-angle [rad]; transl: (T, 3) [m].
+    Returns:
+        ``(features (T, N, 30) float64, attributes (T, 85) float64)``.
+    """
+    feats = detail_features(coarse_points, pair.faces, posed.joints, transl)
+    return feats, attributes(pair.alpha, pair.betas, poses)
+
+
+def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray,
+              coarse: CoarseFn, detail: DetailFn | None = None, *, batch_size: int = 16,
+              margin: float = DEFAULT_MARGIN) -> tuple[np.ndarray, np.ndarray]:
+    """Animate a garment with a coarse model and, if given, a detail model.
+
+    ``M_coarse = I M_b + coarse(...)``, ``M_detail = M_coarse + detail(...)``, then the
+    post-process (:func:`~cloth_usd.core.postprocess.push_out`).
+
+    Args:
+        poses: (T, 72) axis-angle [rad]; transl: (T, 3) root translation [m].
+        coarse, detail: the models (see :data:`CoarseFn`, :data:`DetailFn`).
+        batch_size: frames per model call.
+        margin: the post-process clearance [m].
+    Returns:
+        ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the garment per frame and
+        how many vertices the post-process moved in each.
+    """
+    num_t, n = poses.shape[0], pair.num_vertices
+    points = np.empty((num_t, n, 3))
+    moved = np.zeros(num_t, dtype=np.int64)
+    for lo in range(0, num_t, batch_size):
+        hi = min(lo + batch_size, num_t)
+        posed = pose_body(body, pair, poses[lo:hi], transl[lo:hi])
+        m = posed.garment_points + coarse(coarse_model_features(pair, posed, transl[lo:hi]), pair.graph)
+        if detail is not None:
+            feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])
+            m = m + detail(feats, attrs, pair.graph)
+        points[lo:hi], moved[lo:hi] = push_out(m, posed.garment_points, posed.garment_normals, margin=margin)
+    return points, moved

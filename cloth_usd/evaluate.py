@@ -1,0 +1,372 @@
+"""Evaluation of a model bundle on the data set's test splits (issue #4, part 4).
+
+For every test sequence the garment is animated by
+
+- the skinning tier, exactly as the baker does it (:func:`cloth_usd.core.skinning.skin_garment`);
+- the bundle's coarse and detail tiers through the runtime (onnxruntime,
+  :class:`cloth_usd.runtime.LearnedGarment`, post-process included): what a bake gives;
+- optional ablation runs (torch, through the same :func:`cloth_usd.core.pipeline.run_tiers`):
+  a detail run on top of the bundle's coarse model, or a coarse run alone;
+
+and compared with the simulated garment: the error of a vertex in a frame is its
+Euclidean distance to the simulated position [mm]. Rows: every test split (unseen bodies,
+unseen shirts, unseen motions), broken down by body build (thin / regular / fat) and shirt
+length (short / long), and all of them together. Written to the report folder:
+``report.md`` (the tables), ``metrics.json`` (every number, with the bundle's and data
+set's hashes), ``histograms.npz`` (counts in 0.15 mm bins, as the paper plots them),
+``histograms.png`` and ``means.png``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from .core.body import BodyModel
+from .core.pipeline import run_tiers
+from .core.skinning import skin_garment
+from .errors import ArgumentError
+
+__all__ = ["HIST_BIN_MM", "HIST_MAX_MM", "ErrorStats", "EvaluationReport", "evaluate_bundle",
+           "body_label", "shirt_labels"]
+
+log = logging.getLogger(__name__)
+
+#: Histogram bin width [mm] (the paper's).
+HIST_BIN_MM = 0.15
+#: Errors above this [mm] are counted in the histogram's overflow bin.
+HIST_MAX_MM = 150.0
+REPORT_FORMAT = 1
+_BUILDS = ("thin", "regular", "fat")
+_SPLIT_TITLES = {"test_body": "unseen bodies", "test_garment": "unseen shirts", "test_motion": "unseen motions"}
+
+
+@dataclass
+class ErrorStats:
+    """Running mean, maximum and 0.15 mm histogram of per-vertex errors [mm]."""
+
+    total: float = 0.0
+    count: int = 0
+    maximum: float = 0.0
+    counts: np.ndarray = field(default_factory=lambda: np.zeros(int(round(HIST_MAX_MM / HIST_BIN_MM)), np.int64))
+    """Histogram counts of ``[k * 0.15, (k + 1) * 0.15)`` mm."""
+    overflow: int = 0
+    """Errors of :data:`HIST_MAX_MM` or more."""
+
+    def add(self, errors_mm: np.ndarray) -> None:
+        e = np.asarray(errors_mm, dtype=np.float64).ravel()
+        self.total += float(e.sum())
+        self.count += e.size
+        self.maximum = max(self.maximum, float(e.max(initial=0.0)))
+        k = np.floor(e / HIST_BIN_MM).astype(np.int64)
+        inside = k < self.counts.shape[0]
+        self.counts += np.bincount(k[inside], minlength=self.counts.shape[0])
+        self.overflow += int((~inside).sum())
+
+    @property
+    def mean(self) -> float:
+        return self.total / self.count if self.count else math.nan
+
+    def quantile(self, q: float) -> float:
+        """The ``q`` quantile [mm], to the histogram's resolution (bin centre); NaN when empty."""
+        if not self.count:
+            return math.nan
+        cum = np.cumsum(self.counts)
+        k = int(np.searchsorted(cum, q * self.count, side="left"))
+        return (k + 0.5) * HIST_BIN_MM if k < self.counts.shape[0] else self.maximum
+
+
+def body_label(meta: dict) -> str:
+    """thin / regular / fat from the job's ``body_label`` or its body name (``medium_thin``...)."""
+    if meta.get("body_label"):
+        return str(meta["body_label"])
+    body = str(meta.get("body", "?"))
+    build = body.rsplit("_", 1)[-1]
+    return build if build in _BUILDS else body
+
+
+def shirt_labels(metas: Iterable[dict]) -> dict[int, str]:
+    """short / long per shirt index: the job's ``shirt_label`` if the factory wrote one, else
+    by hem height among the given shirts (highest hem: short, lowest: long, others: ``shirt<i>``)."""
+    hems: dict[int, float | None] = {}
+    labels: dict[int, str] = {}
+    for meta in metas:
+        i = int(meta.get("shirt", -1))
+        if meta.get("shirt_label"):
+            labels[i] = str(meta["shirt_label"])
+        hems[i] = (meta.get("shirt_params") or {}).get("hem")
+    known = {i: h for i, h in hems.items() if h is not None and i not in labels}
+    if len(known) >= 2:
+        ordered = sorted(known, key=lambda i: known[i])
+        labels[ordered[0]], labels[ordered[-1]] = "long", "short"
+    return {i: labels.get(i, f"shirt{i}") for i in hems}
+
+
+@dataclass(frozen=True)
+class EvaluationReport:
+    """What :func:`evaluate_bundle` returns."""
+
+    out_dir: Path
+    tiers: tuple[str, ...]
+    """Column names: skinning, coarse, detail, then the ablations."""
+    rows: tuple[dict, ...]
+    """One per test set: key, title, sequences, frames, and per tier mean / median / p95 [mm]."""
+    metrics: dict
+    """The content of ``metrics.json``."""
+
+
+def _ablation_label(run) -> str:
+    c = run.config
+    parts = [p for p, off in (("no decomposition", not c.decompose),
+                              ("no parser", run.tier.value == "detail" and not c.use_parser)) if off]
+    what = ", ".join(parts) if parts else f"run {run.path.name}"
+    return f"{run.tier.value} ({what})"
+
+
+def _row_keys(split: str, label: str | None) -> list[tuple[str, str]]:
+    title = _SPLIT_TITLES.get(split, split)
+    keys = [("all", "all test sets"), (split, f"{title} (all)")]
+    if label is not None:
+        keys.append((f"{split}:{label}", f"{title}: {label}"))
+    return keys
+
+
+def _row_order(key: str) -> tuple:
+    if key == "all":
+        return (9, 0, "")
+    split, _, label = key.partition(":")
+    rank = {"thin": 0, "regular": 1, "fat": 2, "short": 0, "long": 1}.get(label, 5)
+    return (list(_SPLIT_TITLES).index(split) if split in _SPLIT_TITLES else 8, 0 if label else 1, rank, label)
+
+
+def _session_coarse_fn(session):
+    """A :data:`cloth_usd.core.pipeline.CoarseFn` over an onnxruntime session."""
+    from .runtime.io import OUTPUT, coarse_inputs
+
+    def run(features: np.ndarray, graph) -> np.ndarray:
+        return session.run(coarse_inputs(features, graph.table))[OUTPUT]
+
+    return run
+
+
+def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Path, *,
+                    ablation_runs: Sequence[str | Path] = (), body: BodyModel | None = None,
+                    max_frames: int | None = None, batch_size: int = 16, device: str = "cpu",
+                    splits: Sequence[str] = ("test_body", "test_garment", "test_motion")) -> EvaluationReport:
+    """Evaluate a bundle (and ablation runs) on the test splits; write the report folder.
+
+    Args:
+        data_dir: a ``cloth-usd datagen`` folder.
+        bundle: the model bundle folder (verified on load).
+        out_dir: the report folder (created; its report files are replaced).
+        ablation_runs: training run folders evaluated with torch: detail runs on the
+            bundle's coarse model, coarse runs alone.
+        body: the body model the data was simulated with (default: the embedded one).
+        max_frames: evaluate only the first frames of each sequence.
+        batch_size: frames per model call.
+        device: torch device of the ablation runs (``cpu``, ``cuda``, ``auto``).
+        splits: the test splits to evaluate.
+    Raises:
+        ArgumentError: no test sequences, or a bad folder.
+    """
+    from .core.files import file_sha256
+    from .nn.data import load_dataset
+    from .runtime.bundle import load_bundle
+    from .runtime.garment import LearnedGarment
+
+    bundle_obj = load_bundle(bundle)
+    data = load_dataset(data_dir, splits, body=body, max_frames=max_frames)
+    clips = data.clips
+    if not clips:
+        raise ArgumentError(f"--data {data_dir}: no accepted sequences in the splits {', '.join(splits)}")
+    body = data.body
+    trained_on = bundle_obj.manifest.get("training_data", {}).get("manifest_sha256")
+    if trained_on != data.manifest_sha256:
+        log.warning("%s: the bundle was trained on another data set (manifest sha256 %s...)", data_dir,
+                    str(trained_on)[:12])
+    runs = []
+    ablations: dict[str, dict] = {}
+    if ablation_runs:
+        from .nn.train import BEST, load_run, pick_device, torch_coarse_fn, torch_detail_fn
+
+        dev = pick_device(device)
+
+        shipped = (bundle_obj.manifest["models"]["coarse"].get("config", {}).get("train", {}) or {}).get("best_sha256")
+        for path in ablation_runs:
+            run = load_run(path, device=dev)
+            label = _ablation_label(run)
+            if label in ablations:
+                label = f"{label} [{run.path.name}]"
+            fn = torch_detail_fn(run.model, dev) if run.tier.value == "detail" else torch_coarse_fn(run.model, dev)
+            used = (run.info.get("coarse_run") or {}).get("best_sha256")
+            record = {"run": str(run.path), "tier": run.tier.value, "config": run.config.to_json(),
+                      "best_epoch": run.epoch, "best_sha256": file_sha256(run.path / BEST)}
+            if run.tier.value == "detail":
+                record["coarse_matches_bundle"] = used == shipped if shipped else None
+                if shipped and used != shipped:
+                    log.warning("%s: trained on another coarse model than the bundle's", run.path)
+            ablations[label] = record
+            runs.append((label, run.tier.value, fn))
+    shipped_coarse = _session_coarse_fn(bundle_obj.session("coarse"))
+    tiers = ["skinning", "coarse"] + (["detail"] if "detail" in [t.value for t in bundle_obj.tiers] else []) \
+        + [label for label, _, _ in runs]
+    test_garment = [c.meta for c in clips if c.split.value == "test_garment"]
+    shirts = shirt_labels(test_garment)
+    stats: dict[str, dict[str, ErrorStats]] = {}
+    titles: dict[str, str] = {}
+    seqs: dict[str, int] = {}
+    frames: dict[str, int] = {}
+    labels = {clip.name: body_label(clip.meta) if clip.split.value == "test_body" else
+              shirts.get(int(clip.meta.get("shirt", -1))) if clip.split.value == "test_garment" else None
+              for clip in clips}
+    variety = {s: {labels[c.name] for c in clips if c.split.value == s} for s in {c.split.value for c in clips}}
+    for clip in clips:
+        split = clip.split.value
+        keys = _row_keys(split, labels[clip.name] if len(variety[split]) > 1 else None)
+        for key, title in keys:
+            titles[key] = title
+            seqs[key] = seqs.get(key, 0) + 1
+            frames[key] = frames.get(key, 0) + clip.num_frames
+            stats.setdefault(key, {t: ErrorStats() for t in tiers})
+        learned = LearnedGarment(bundle_obj, body, clip.pair.betas, clip.rest_points, clip.pair.faces,
+                                 binding=clip.pair.binding)
+        truth = clip.positions.astype(np.float64)
+        outputs = {"skinning": skin_garment(clip.pair.binding, clip.poses, clip.transl, body.parents)}
+        for tier in ("coarse", "detail"):
+            if tier in tiers:
+                outputs[tier] = learned.evaluate(tier, clip.poses, clip.transl, batch_size=batch_size).points
+        for label_, tier, fn in runs:
+            if tier == "detail":
+                outputs[label_] = run_tiers(body, learned.pair, clip.poses, clip.transl, shipped_coarse, fn,
+                                            batch_size=batch_size, margin=learned.margin)[0]
+            else:
+                outputs[label_] = run_tiers(body, learned.pair, clip.poses, clip.transl, fn,
+                                            batch_size=batch_size, margin=learned.margin)[0]
+        for tier, pts in outputs.items():
+            err = np.linalg.norm(pts - truth, axis=-1) * 1000.0
+            for key, _ in keys:
+                stats[key][tier].add(err)
+        log.info("%s: %s", clip.name, ", ".join(f"{t} {stats[keys[-1][0]][t].mean:.2f} mm" for t in tiers))
+    order = sorted(stats, key=_row_order)
+    rows = []
+    for key in order:
+        row = {"key": key, "title": titles[key], "sequences": seqs[key], "frames": frames[key],
+               "vertex_frames": stats[key][tiers[0]].count,
+               "mean_mm": {t: stats[key][t].mean for t in tiers},
+               "median_mm": {t: stats[key][t].quantile(0.5) for t in tiers},
+               "p95_mm": {t: stats[key][t].quantile(0.95) for t in tiers},
+               "max_mm": {t: stats[key][t].maximum for t in tiers}}
+        rows.append(row)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    metrics = {
+        "format": REPORT_FORMAT,
+        "bundle": {"path": str(Path(bundle).resolve()), "name": bundle_obj.name, "sha256": bundle_obj.sha256,
+                   "files": dict(bundle_obj.manifest["files"])},
+        "data": {"path": str(Path(data_dir).resolve()), "manifest_sha256": data.manifest_sha256,
+                 "same_as_training": trained_on == data.manifest_sha256, "max_frames": max_frames},
+        "error": "Euclidean distance of each garment vertex to the simulated one, every frame [mm]; "
+                 "learned tiers after the post-process",
+        "histogram_bin_mm": HIST_BIN_MM,
+        "tiers": tiers,
+        "ablations": ablations,
+        "rows": rows,
+    }
+    (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
+    np.savez(out / "histograms.npz", bin_mm=HIST_BIN_MM, edges_mm=np.arange(len(ErrorStats().counts) + 1) * HIST_BIN_MM,
+             **{f"{key}|{t}": np.append(stats[key][t].counts, stats[key][t].overflow) for key in order for t in tiers})
+    (out / "report.md").write_text(_markdown(metrics))
+    _plot(stats, order, titles, tiers, out)
+    return EvaluationReport(out_dir=out, tiers=tuple(tiers), rows=tuple(rows), metrics=metrics)
+
+
+def _fmt(x: float) -> str:
+    return "-" if x is None or math.isnan(x) else f"{x:.2f}"
+
+
+def _markdown(metrics: dict) -> str:
+    tiers = metrics["tiers"]
+    b, d = metrics["bundle"], metrics["data"]
+    lines = [
+        f"# Evaluation of bundle `{b['name']}`",
+        "",
+        f"- bundle: `{b['path']}` (manifest sha256 `{b['sha256'][:16]}...`)",
+        f"- data: `{d['path']}` (manifest sha256 `{d['manifest_sha256'][:16]}...`; "
+        f"{'the data set the bundle was trained on' if d['same_as_training'] else 'NOT the bundle training data set'})",
+        f"- error: {metrics['error']}",
+        f"- histograms: {metrics['histogram_bin_mm']} mm bins (`histograms.png`, `histograms.npz`)",
+    ]
+    for label, a in metrics["ablations"].items():
+        note = "" if a.get("coarse_matches_bundle") in (True, None) else " (trained on another coarse model)"
+        lines.append(f"- {label}: torch run `{a['run']}`, epoch {a['best_epoch']}{note}")
+    has_ratio = "detail" in tiers
+    head = ["test set", "sequences", "frames", *tiers] + (["detail / coarse"] if has_ratio else [])
+    lines += ["", "## Mean per-vertex error [mm]", "", "| " + " | ".join(head) + " |",
+              "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|"]
+    for r in metrics["rows"]:
+        cells = [r["title"], str(r["sequences"]), str(r["frames"])] + [_fmt(r["mean_mm"][t]) for t in tiers]
+        if has_ratio:
+            cells.append(_fmt(r["mean_mm"]["detail"] / r["mean_mm"]["coarse"]) if r["mean_mm"]["coarse"] else "-")
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", "## Median / 95th percentile [mm]", "", "| test set | " + " | ".join(tiers) + " |",
+              "|---|" + "---:|" * len(tiers)]
+    for r in metrics["rows"]:
+        lines.append("| " + r["title"] + " | " + " | ".join(
+            f"{_fmt(r['median_mm'][t])} / {_fmt(r['p95_mm'][t])}" for t in tiers) + " |")
+    lines += ["", "## Ordering on each test set", ""]
+    for r in metrics["rows"]:
+        m = r["mean_mm"]
+        checks = [f"coarse < skinning: {'yes' if m['coarse'] < m['skinning'] else 'NO'}"]
+        if has_ratio:
+            checks.append(f"detail < coarse: {'yes' if m['detail'] < m['coarse'] else 'NO'}")
+        lines.append(f"- {r['title']}: " + "; ".join(checks))
+    return "\n".join(lines) + "\n"
+
+
+def _plot(stats: dict, order: list[str], titles: dict, tiers: list[str], out: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from matplotlib.figure import Figure
+
+    cols = min(3, len(order))
+    nrows = math.ceil(len(order) / cols)
+    fig = Figure(figsize=(5 * cols, 3.4 * nrows))
+    axes = np.atleast_1d(fig.subplots(nrows, cols, squeeze=False)).ravel()
+    for ax, key in zip(axes, order):
+        top = max(s.quantile(0.99) for s in stats[key].values() if s.count)
+        top = max(top, 10 * HIST_BIN_MM)
+        for i, tier in enumerate(tiers):
+            s = stats[key][tier]
+            if not s.count:
+                continue
+            k = int(math.ceil(top / HIST_BIN_MM))
+            edges = np.arange(k + 1) * HIST_BIN_MM
+            ax.stairs(s.counts[:k] / s.count, edges, label=f"{tier} ({s.mean:.2f} mm)", color=f"C{i}")
+        ax.set_title(titles[key], fontsize=10)
+        ax.set_xlabel(f"per-vertex error [mm] ({HIST_BIN_MM} mm bins)")
+        ax.set_ylabel("fraction")
+        ax.legend(fontsize=7)
+    for ax in axes[len(order):]:
+        ax.set_visible(False)
+    fig.tight_layout()
+    fig.savefig(str(out / "histograms.png"), dpi=90)
+
+    fig = Figure(figsize=(max(6, 1.2 * len(order) * len(tiers) / 2), 4))
+    ax = fig.subplots()
+    width = 0.8 / len(tiers)
+    x = np.arange(len(order))
+    for i, tier in enumerate(tiers):
+        ax.bar(x + i * width - 0.4 + width / 2, [stats[k][tier].mean for k in order], width, label=tier,
+               color=f"C{i}")
+    ax.set_xticks(x, [titles[k] for k in order], rotation=20, ha="right", fontsize=8)
+    ax.set_ylabel("mean per-vertex error [mm]")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(str(out / "means.png"), dpi=90)

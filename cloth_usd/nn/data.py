@@ -1,0 +1,326 @@
+"""Training data: data-factory shards -> model inputs and targets, normalisation statistics.
+
+Every model input is built through :mod:`cloth_usd.core.pipeline`, the functions the
+runtime uses at inference, so training and inference features are the same numbers.
+Targets follow METHOD.md: the coarse model learns ``Delta_coarse = M_coarse^GT - I M_b``
+(``M_coarse^GT`` the shard's Laplacian-smoothed simulation), the detail model learns
+``Delta_detail = M_sim - M_coarse`` on a given coarse garment (see
+:class:`cloth_usd.nn.train.TrainConfig.coarse_input`).
+
+numpy only (no torch). Shape letters: T frames, B frames of a batch, N garment vertices,
+F features.
+"""
+
+from __future__ import annotations
+
+import enum
+import hashlib
+import logging
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import numpy as np
+
+from ..core.body import BodyModel, load_body_model
+from ..core.features import ATTRIBUTE_FEATURES
+from ..core.files import file_sha256
+from ..core.fit import FitModel
+from ..core.pipeline import (
+    GarmentPair,
+    PosedBody,
+    coarse_model_features,
+    detail_model_inputs,
+    pose_body,
+    prepare_pair,
+)
+from ..errors import ArgumentError
+
+__all__ = ["Split", "TEST_SPLITS", "Clip", "DataSet", "load_dataset", "plan_batches", "CoarseExample",
+           "DetailExample", "coarse_example", "detail_example", "Moments", "Statistics", "even_frames"]
+
+log = logging.getLogger(__name__)
+
+#: The data set's manifest and fit model, as the factory writes them.
+MANIFEST = "manifest.json"
+FIT = "fit.npz"
+#: Standard deviations below this are replaced by 1 (a constant input carries no scale).
+MIN_STD = 1e-6
+#: Output scales below this [m] are raised to it.
+MIN_SCALE = 1e-4
+
+
+class Split(str, enum.Enum):
+    """The factory's splits (:func:`cloth_usd.datagen.factory.plan_jobs`)."""
+
+    TRAIN = "train"
+    VAL = "val"
+    TEST_BODY = "test_body"
+    """Training shirts on unseen bodies."""
+    TEST_GARMENT = "test_garment"
+    """Unseen shirts on training bodies."""
+    TEST_MOTION = "test_motion"
+    """Training pairs with unseen motions."""
+
+
+TEST_SPLITS = (Split.TEST_BODY, Split.TEST_GARMENT, Split.TEST_MOTION)
+
+
+@dataclass(frozen=True, eq=False)
+class Clip:
+    """One simulated sequence with its garment-body pair prepared."""
+
+    name: str
+    """The manifest's sequence name."""
+    split: Split
+    meta: dict
+    """The job's provenance from the manifest: shirt, shirt_params, body, motion, ..."""
+    pair: GarmentPair
+    """Association, graph and fit attribute, as the runtime computes them."""
+    rest_points: np.ndarray
+    """(N, 3) float64 rest garment [m], canonical body frame."""
+    positions: np.ndarray
+    """(T, N, 3) float32 simulated garment [m], world frame."""
+    coarse: np.ndarray
+    """(T, N, 3) float32 coarse target [m] (Laplacian-smoothed simulation)."""
+    poses: np.ndarray
+    """(T, 72) float64 axis-angle [rad]."""
+    transl: np.ndarray
+    """(T, 3) float64 root translation [m]."""
+
+    @property
+    def num_frames(self) -> int:
+        """T."""
+        return int(self.positions.shape[0])
+
+
+@dataclass(frozen=True)
+class DataSet:
+    """The shards of a factory folder, loaded."""
+
+    root: Path
+    """The data folder."""
+    manifest_sha256: str
+    """sha256 of its ``manifest.json`` (recorded with every model trained on it)."""
+    fit: FitModel
+    """The fit attribute's model (``fit.npz``), fitted on the training pairs."""
+    body: BodyModel
+    """The body model the shards were simulated with."""
+    clips: tuple[Clip, ...]
+
+    def split(self, split: Split | str) -> list[Clip]:
+        """The clips of one split, in name order."""
+        split = Split(split)
+        return [c for c in self.clips if c.split is split]
+
+
+def _pair_key(rest: np.ndarray, faces: np.ndarray, betas: np.ndarray) -> str:
+    h = hashlib.sha256()
+    for a in (rest, faces, betas):
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()
+
+
+def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, *,
+                 body: BodyModel | None = None, max_frames: int | None = None) -> DataSet:
+    """Load the accepted shards of some splits of a factory folder.
+
+    Args:
+        root: the folder ``cloth-usd datagen`` wrote (``manifest.json``, ``fit.npz``, shards).
+        splits: the splits to load (all when None).
+        body: the body model the data was simulated with (default: the embedded one).
+        max_frames: keep only the first frames of every sequence (quick runs).
+    Raises:
+        ArgumentError: naming the folder, when it is not a data set or a shard is unreadable.
+    """
+    from ..datagen.dataset import DatasetError, Manifest, read_shard
+
+    root = Path(root)
+    if not (root / MANIFEST).is_file() or not (root / FIT).is_file():
+        raise ArgumentError(f"--data {root}: not a data set folder (needs {MANIFEST} and {FIT}; "
+                            "make one with cloth-usd datagen)")
+    try:
+        manifest = Manifest.read(root)
+    except DatasetError as exc:
+        raise ArgumentError(str(exc)) from exc
+    wanted = {Split(s) for s in splits} if splits is not None else set(Split)
+    body = body if body is not None else load_body_model()
+    fit = FitModel.load(root / FIT)
+    pairs: dict[str, GarmentPair] = {}
+    clips = []
+    for name in manifest.accepted:
+        entry = manifest.sequences[name]
+        split_name = entry.get("split") or entry.get("meta", {}).get("split")
+        try:
+            split = Split(split_name)
+        except ValueError:
+            log.warning("%s: sequence %s has unknown split %r, skipped", root, name, split_name)
+            continue
+        if split not in wanted:
+            continue
+        try:
+            shard = read_shard(root / entry["shard"])
+        except DatasetError as exc:
+            raise ArgumentError(str(exc)) from exc
+        rest = shard.garment_vertices.astype(np.float64)
+        key = _pair_key(rest, shard.garment_faces, shard.betas)
+        if key not in pairs:
+            pairs[key] = prepare_pair(body, shard.betas, rest, shard.garment_faces, fit)
+        t = shard.positions.shape[0] if max_frames is None else min(max_frames, shard.positions.shape[0])
+        clips.append(Clip(name=name, split=split, meta=dict(entry.get("meta", {})), pair=pairs[key],
+                          rest_points=rest, positions=shard.positions[:t], coarse=shard.coarse[:t],
+                          poses=shard.poses[:t], transl=shard.transl[:t]))
+    log.info("%s: %d sequences, %d garment-body pairs", root, len(clips), len(pairs))
+    return DataSet(root=root, manifest_sha256=file_sha256(root / MANIFEST), fit=fit, body=body,
+                   clips=tuple(clips))
+
+
+def even_frames(num_frames: int, count: int | None) -> np.ndarray:
+    """(K,) int64 ``count`` frames spread evenly over ``[0, num_frames)`` (all when None or 0)."""
+    if not count or count >= num_frames:
+        return np.arange(num_frames, dtype=np.int64)
+    return np.unique(np.linspace(0, num_frames - 1, count).round().astype(np.int64))
+
+
+def plan_batches(clips: Sequence[Clip], batch: int, rng: np.random.Generator | None = None, *,
+                 frames: int | None = None) -> list[tuple[int, np.ndarray]]:
+    """Batches of frames, each from one clip (a batch shares one garment graph).
+
+    Args:
+        clips: the clips.
+        batch: frames per batch (B).
+        rng: shuffles the frames of every clip and the batch order; None keeps both in order.
+        frames: use only this many evenly spread frames per clip (all when None).
+    Returns:
+        ``[(clip index, frames (B',) int64), ...]``, B' <= B.
+    """
+    if batch < 1:
+        raise ArgumentError(f"batch must be >= 1 frame, got {batch}")
+    out = []
+    for k, clip in enumerate(clips):
+        idx = even_frames(clip.num_frames, frames)
+        if rng is not None:
+            idx = rng.permutation(idx)
+        out += [(k, idx[lo:lo + batch]) for lo in range(0, idx.shape[0], batch)]
+    if rng is not None:
+        out = [out[i] for i in rng.permutation(len(out))]
+    return out
+
+
+@dataclass(frozen=True)
+class CoarseExample:
+    """Coarse model inputs and target for a batch of frames of one clip."""
+
+    features: np.ndarray
+    """(B, N, 7) float64 node features."""
+    base: np.ndarray
+    """(B, N, 3) float64 ``I M_b``: the associated posed body vertices [m]."""
+    target: np.ndarray
+    """(B, N, 3) float64 ``Delta_coarse^GT`` [m]."""
+    posed: PosedBody
+
+
+@dataclass(frozen=True)
+class DetailExample:
+    """Detail model inputs and target for a batch of frames of one clip."""
+
+    features: np.ndarray
+    """(B, N, 30) float64 node features on the coarse garment."""
+    attributes: np.ndarray
+    """(B, 85) float64 (alpha, beta, theta)."""
+    base: np.ndarray
+    """(B, N, 3) float64 the coarse garment ``M_coarse`` [m] the features were made on."""
+    target: np.ndarray
+    """(B, N, 3) float64 ``Delta_detail^GT = M_sim - M_coarse`` [m]."""
+
+
+def coarse_example(body: BodyModel, clip: Clip, frames: np.ndarray) -> CoarseExample:
+    """Coarse inputs and target of ``frames`` of ``clip`` (the runtime's feature path)."""
+    poses, transl = clip.poses[frames], clip.transl[frames]
+    posed = pose_body(body, clip.pair, poses, transl)
+    feats = coarse_model_features(clip.pair, posed, transl)
+    return CoarseExample(features=feats, base=posed.garment_points,
+                         target=clip.coarse[frames].astype(np.float64) - posed.garment_points, posed=posed)
+
+
+def detail_example(clip: Clip, frames: np.ndarray, posed: PosedBody, coarse_points: np.ndarray) -> DetailExample:
+    """Detail inputs and target of ``frames`` of ``clip`` on the coarse garment ``coarse_points``.
+
+    Args:
+        posed: the posed body of those frames (:attr:`CoarseExample.posed`).
+        coarse_points: (B, N, 3) ``M_coarse`` [m]: the coarse model's prediction, or the
+            coarse target.
+    """
+    coarse_points = np.asarray(coarse_points, dtype=np.float64)
+    feats, attrs = detail_model_inputs(clip.pair, coarse_points, posed, clip.poses[frames], clip.transl[frames])
+    return DetailExample(features=feats, attributes=attrs, base=coarse_points,
+                         target=clip.positions[frames].astype(np.float64) - coarse_points)
+
+
+class Moments:
+    """Running per-channel mean and standard deviation over the last axis (float64 sums)."""
+
+    def __init__(self, channels: int) -> None:
+        self.count = 0
+        self.total = np.zeros(channels)
+        self.squares = np.zeros(channels)
+
+    def add(self, x: np.ndarray) -> None:
+        """Add samples ``x`` (..., C)."""
+        x = np.asarray(x, dtype=np.float64).reshape(-1, self.total.shape[0])
+        self.count += x.shape[0]
+        self.total += x.sum(axis=0)
+        self.squares += (x * x).sum(axis=0)
+
+    @property
+    def mean(self) -> np.ndarray:
+        return self.total / max(self.count, 1)
+
+    @property
+    def std(self) -> np.ndarray:
+        """Standard deviation; channels below :data:`MIN_STD` get 1 (never divide by ~0)."""
+        var = np.maximum(self.squares / max(self.count, 1) - self.mean ** 2, 0.0)
+        std = np.sqrt(var)
+        return np.where(std < MIN_STD, 1.0, std)
+
+    @property
+    def rms(self) -> np.ndarray:
+        """Root mean square, at least :data:`MIN_SCALE`."""
+        return np.maximum(np.sqrt(self.squares / max(self.count, 1)), MIN_SCALE)
+
+
+@dataclass(frozen=True)
+class Statistics:
+    """Normalisation statistics of one generator, computed on the training split."""
+
+    input_mean: np.ndarray
+    """(F,) float64 node feature mean."""
+    input_std: np.ndarray
+    """(F,) float64 node feature standard deviation (1 where constant)."""
+    output_scale: np.ndarray
+    """(3,) float64 root mean square of the target displacement per axis [m]."""
+    attribute_mean: np.ndarray
+    """(85,) float64 parser input mean (zeros for the coarse model)."""
+    attribute_std: np.ndarray
+    """(85,) float64 parser input standard deviation (ones for the coarse model)."""
+
+    @classmethod
+    def from_moments(cls, features: Moments, target: Moments, attributes: Moments | None = None) -> "Statistics":
+        attrs = attributes if attributes is not None and attributes.count else None
+        return cls(input_mean=features.mean, input_std=features.std, output_scale=target.rms,
+                   attribute_mean=attrs.mean if attrs else np.zeros(ATTRIBUTE_FEATURES),
+                   attribute_std=attrs.std if attrs else np.ones(ATTRIBUTE_FEATURES))
+
+    def save(self, path: str | Path) -> None:
+        np.savez(path, input_mean=self.input_mean, input_std=self.input_std, output_scale=self.output_scale,
+                 attribute_mean=self.attribute_mean, attribute_std=self.attribute_std)
+
+    @classmethod
+    def load(cls, path: str | Path) -> "Statistics":
+        with np.load(path, allow_pickle=False) as d:
+            return cls(**{k: d[k] for k in ("input_mean", "input_std", "output_scale", "attribute_mean",
+                                             "attribute_std")})
+
+    def to_json(self) -> dict:
+        return {k: np.round(getattr(self, k), 8).tolist() for k in
+                ("input_mean", "input_std", "output_scale", "attribute_mean", "attribute_std")}

@@ -1,0 +1,114 @@
+"""Smoke test of bench/bench_tiers.py: its main on a hand-built bundle and a tiny data set, few frames.
+
+The bundle's models are one-MatMul ONNX graphs built with ``onnx.helper`` (exporting real
+generators takes half a minute); the data set is the factory on a 2-shirt, 2-body config
+with the fake simulator of ``tests/nn/train_data.py``.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SMALL = {"shirts": 2, "test_shirts": [], "bodies": ["short_thin", "tall_fat"], "test_bodies": [],
+         "garment_vertices": 300, "max_frames": 2, "train_motions": [{"kind": "walk", "seconds": 1.0, "seed": 0}],
+         "test_motions": [{"kind": "dance", "seconds": 1.0, "seed": 5}],
+         "sim": {"substeps": 2, "iterations": 2, "collider_faces": 2000}}
+
+
+def _module(name: str, path: Path):
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module  # before exec: dataclasses look their module up
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+def _linear_model(path: Path, inputs: tuple[str, ...], in_features: int, seed: int) -> Path:
+    """``delta = features @ W`` (W a few mm); every other input is declared and unused."""
+    import onnx
+    from onnx import TensorProto, helper, numpy_helper
+
+    shapes = {"features": (TensorProto.FLOAT, ["B", "N", in_features]), "attributes": (TensorProto.FLOAT, ["B", 85]),
+              "cluster": (TensorProto.INT64, ["N"])}
+    decl = [helper.make_tensor_value_info(n, *shapes.get(n, (TensorProto.BOOL if n.endswith("mask") else
+                                                             TensorProto.INT64, ["A", "C"]))) for n in inputs]
+    w = np.random.default_rng(seed).normal(0, 0.003, (in_features, 3)).astype(np.float32)
+    graph = helper.make_graph([helper.make_node("MatMul", ["features", "W"], ["delta"])], "linear", decl,
+                              [helper.make_tensor_value_info("delta", TensorProto.FLOAT, ["B", "N", 3])],
+                              [numpy_helper.from_array(w, "W")])
+    onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 18)]), str(path))
+    return path
+
+
+@pytest.fixture(scope="module")
+def bundle_and_data(tmp_path_factory):
+    pytest.importorskip("onnxruntime", reason="the learned tiers need onnxruntime")
+    pytest.importorskip("onnx", reason="building the test models and quantizing them needs onnx")
+    pytest.importorskip("matplotlib", reason="the bench plots with matplotlib")
+    from cloth_usd.runtime.bundle import write_bundle
+    from cloth_usd.runtime.io import COARSE_INPUTS, DETAIL_INPUTS
+
+    tmp_path = tmp_path_factory.mktemp("bench_tiers")
+    train_data = _module("train_data", ROOT / "tests" / "nn" / "train_data.py")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(train_data, "TINY", SMALL)
+        data = train_data.build_tiny_dataset(tmp_path / "data")
+    coarse = _linear_model(tmp_path / "coarse.onnx", COARSE_INPUTS, 7, 0)
+    detail = _linear_model(tmp_path / "detail.onnx", DETAIL_INPUTS, 30, 1)
+    bundle = write_bundle(tmp_path / "bundle", name="linear-tshirt", category="tshirt", coarse_onnx=coarse,
+                          detail_onnx=detail, fit_npz=data / "fit.npz", configs={},
+                          training_data={"manifest_sha256": "0" * 64, "description": "tests only"},
+                          metrics={}, opset=18)
+    return bundle, data
+
+
+def test_bench_tiers_main_writes_table_plot_and_json(bundle_and_data, tmp_path, capsys, monkeypatch):
+    from cloth_usd import evaluate
+
+    bench = _module("bench_tiers", ROOT / "bench" / "bench_tiers.py")
+    monkeypatch.setattr(evaluate, "_plot", lambda *args, **kwargs: None, raising=False)  # its histograms: 2 s
+    bundle, data = bundle_and_data
+    out = tmp_path / "out"
+    assert bench.main(["--bundle", str(bundle), "--data", str(data), "--vertices", "300", "--frames", "2",
+                       "--repeats", "1", "--batch-size", "2", "--threads", "1", "--eval-frames", "1",
+                       "--no-torch", "--out", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "| tier | precision | ms/frame | setup ms | mean mm | p95 mm | target |" in printed
+    assert "detail int8 / fp32 speed:" in printed
+    assert (out / "table.md").read_text() in printed
+    assert (out / "pareto.png").stat().st_size > 0
+    result = json.loads((out / "bench.json").read_text())
+    rows = {(r["tier"], r["precision"]): r for r in result["rows"]}
+    assert set(rows) == {("skinning", "fp64"), ("coarse", "fp32"), ("coarse", "int8"), ("detail", "fp32"),
+                         ("detail", "int8")}
+    for r in rows.values():
+        assert r["na"] == "" and r["ms_per_frame"] > 0 and 0 < r["mean_mm"] < 100, r
+    assert result["speed"]["vertices"] > 0 and result["threads"] == 1
+    assert any(r["pareto"] for r in rows.values())
+
+
+def test_failed_quantization_is_reported_not_raised(bundle_and_data, tmp_path, monkeypatch):
+    import onnxruntime.quantization
+
+    from cloth_usd.runtime.bundle import load_bundle
+
+    bench = _module("bench_tiers", ROOT / "bench" / "bench_tiers.py")
+
+    def refuse(model_input, model_output, **kwargs):
+        if "detail" in str(model_input):
+            raise NotImplementedError("no int8 kernel for OpX")
+        return real(model_input, model_output, **kwargs)
+
+    real = onnxruntime.quantization.quantize_dynamic
+    monkeypatch.setattr(onnxruntime.quantization, "quantize_dynamic", refuse)
+    path, failed = bench.quantize_bundle(load_bundle(bundle_and_data[0]), tmp_path / "int8")
+    assert failed == {"detail": "quantization failed: NotImplementedError: no int8 kernel for OpX"}
+    assert [t.value for t in load_bundle(path).tiers] == ["coarse"]

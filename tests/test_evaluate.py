@@ -1,0 +1,86 @@
+"""cloth-usd evaluate: the report of a trained bundle and two ablation runs on the tiny data set."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cloth_usd.evaluate import HIST_BIN_MM, ErrorStats, body_label, shirt_labels
+
+
+def _train_data():
+    """tests/nn/train_data.py (shared with the training tests) as a module."""
+    path = Path(__file__).parent / "nn" / "train_data.py"
+    spec = importlib.util.spec_from_file_location("train_data", path)
+    module = sys.modules.get("train_data") or importlib.util.module_from_spec(spec)
+    if "train_data" not in sys.modules:
+        spec.loader.exec_module(module)
+        sys.modules["train_data"] = module
+    return module
+
+
+def test_error_stats_bins_and_quantiles():
+    s = ErrorStats()
+    s.add(np.array([0.0, 0.1, 0.16, 0.31, 1000.0]))
+    assert s.count == 5 and s.overflow == 1
+    assert s.mean == pytest.approx(1000.57 / 5)
+    assert list(s.counts[:3]) == [2, 1, 1]
+    assert s.quantile(0.5) == pytest.approx(1.5 * HIST_BIN_MM)
+    assert np.isnan(ErrorStats().mean)
+
+
+def test_labels_come_from_metadata_or_body_and_hem():
+    assert body_label({"body": "medium_fat"}) == "fat"
+    assert body_label({"body": "slim"}) == "slim"
+    assert body_label({"body": "slim", "body_label": "thin"}) == "thin"
+    metas = [{"shirt": 0, "shirt_params": {"hem": 0.02}}, {"shirt": 1, "shirt_params": {"hem": -0.14}},
+             {"shirt": 8, "shirt_params": {"hem": -0.05}}]
+    assert shirt_labels(metas) == {0: "short", 1: "long", 8: "shirt8"}
+    assert shirt_labels([{"shirt": 2, "shirt_params": {"hem": -0.06}}]) == {2: "shirt2"}
+    assert shirt_labels([{"shirt": 3, "shirt_label": "long"}]) == {3: "long"}
+
+
+@pytest.mark.slow
+def test_evaluate_writes_report_with_every_tier(tmp_path_factory, tmp_path):
+    torch = pytest.importorskip("torch", reason="training the ablations needs torch")
+    pytest.importorskip("onnxruntime", reason="the learned tiers need onnxruntime")
+    from cloth_usd.cli import main
+    from cloth_usd.nn.data import Split, load_dataset
+    from cloth_usd.nn.train import TrainConfig, train
+
+    helpers = _train_data()
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        bundle = helpers.tiny_trained_bundle(tmp_path_factory)
+        data, coarse, _ = helpers.tiny_runs(tmp_path_factory)
+        quick = {**helpers.TINY_TRAIN, "epochs": 1, "max_batches": 2}
+        ds = load_dataset(data, (Split.TRAIN, Split.VAL), max_frames=quick["max_frames"])
+        for name, switch in (("no-dec", {"decompose": False}), ("no-parser", {"use_parser": False})):
+            train("detail", data, tmp_path / name, TrainConfig(**quick, **switch), coarse_run=coarse, device="cpu",
+                  dataset=ds)
+        out = tmp_path / "report"
+        assert main(["evaluate", "--data", str(data), "--bundle", str(bundle), "--ablation-runs",
+                     str(tmp_path / "no-dec"), str(tmp_path / "no-parser"), "-o", str(out), "--max-frames", "3"]) == 0
+    finally:
+        torch.set_num_threads(threads)
+    metrics = json.loads((out / "metrics.json").read_text())
+    tiers = ["skinning", "coarse", "detail", "detail (no decomposition)", "detail (no parser)"]
+    assert metrics["tiers"] == tiers
+    assert metrics["data"]["same_as_training"] is True
+    assert all(a["coarse_matches_bundle"] for a in metrics["ablations"].values())
+    keys = [r["key"] for r in metrics["rows"]]
+    assert keys == ["test_body", "test_garment", "test_motion", "all"]
+    for row in metrics["rows"]:
+        assert all(0 < row["mean_mm"][t] < 100 for t in tiers), row
+    hist = np.load(out / "histograms.npz")
+    assert hist["all|detail"].sum() == metrics["rows"][-1]["vertex_frames"]
+    report = (out / "report.md").read_text()
+    for text in ["unseen bodies (all)", "unseen shirts (all)", "unseen motions (all)", *tiers]:
+        assert text in report
+    assert (out / "histograms.png").stat().st_size > 0 and (out / "means.png").stat().st_size > 0
