@@ -71,6 +71,10 @@ class CLOTH_USD_OT_bake(Operator):
 
     def execute(self, context):
         settings = context.scene.cloth_usd
+        missing = scene_io.usd_import_missing()
+        if missing:  # before baking, so nothing is written that cannot be shown
+            self.report({'ERROR'}, missing)
+            return {'CANCELLED'}
         cache, shot_layer = scene_io.output_paths(settings)
         own = str(cache) == settings.baked_cache  # re-baking our own output replaces it
         with scene_io.progress(context, 3) as advance:

@@ -104,12 +104,24 @@ def remove_imported(collection) -> None:
         bpy.data.batch_remove([i for i in ids if i.users == 0])
 
 
+def usd_import_missing() -> str:
+    """Why this Blender cannot import USD ('' when it can): some Linux distributions build
+    Blender without USD (``bpy.app.build_options.usd`` is False)."""
+    if not getattr(bpy.app.build_options, "usd", True) or not hasattr(bpy.ops.wm, "usd_import"):
+        return ("this Blender was built without USD support, so the baked cache cannot be imported; "
+                "use a blender.org build")
+    return ""
+
+
 def import_shot(context, collection, shot: Path, prim_paths: Sequence[str]) -> None:
     """Import the prims at ``prim_paths`` (and their ancestors) of a USD file into
     ``collection``; animated points become a Mesh Sequence Cache modifier.
 
     Raises RuntimeError when Blender's USD import fails.
     """
+    missing = usd_import_missing()
+    if missing:
+        raise RuntimeError(missing)
     view_layer = context.view_layer
     view_layer.update()  # let the depsgraph drop its copies of removed cache files too
     previous = view_layer.active_layer_collection

@@ -313,3 +313,19 @@ def test_overwrite_replaces_files_the_add_on_did_not_write(blender, shot):
     path.with_name("shot_cloth.usdc").write_bytes(b"somebody else's file")
     assert bake_op(shot_path=str(path), overwrite=True) == {"FINISHED"}
     assert garment_object("Tube").modifiers[0].type == "MESH_SEQUENCE_CACHE"
+
+
+def test_a_blender_without_usd_import_refuses_before_writing(blender, shot, monkeypatch):
+    # Some Linux distributions build Blender without USD (Debian's 4.3): Bake must say so
+    # in one line and write nothing, rather than bake and then fail to import.
+    import sys
+
+    scene_io = next(m for name, m in sys.modules.items() if name.endswith(".scene_io") and hasattr(m, "import_shot"))
+    monkeypatch.setattr(scene_io, "usd_import_missing", lambda: "this Blender was built without USD support")
+    path = shot("tube_y_m")
+    bpy.context.scene.cloth_usd.shot_path = str(path)
+    before, files = snapshot(), folder_state(path.parent)
+    with pytest.raises(RuntimeError, match="without USD support"):
+        bpy.ops.cloth_usd.bake()
+    assert snapshot() == before
+    assert folder_state(path.parent) == files
