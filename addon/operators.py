@@ -82,7 +82,8 @@ class CLOTH_USD_OT_bake(Operator):
                 result = cloth_usd.bake(scene_io.abspath(settings.shot_path), cache, shot=shot_layer,
                                         frames=scene_io.frames(context, settings), tier=settings.tier,
                                         force=own or settings.overwrite,
-                                        body_model=scene_io.body_model(context))
+                                        body_model=scene_io.body_model(context),
+                                        models=scene_io.models_dir(context))
             except (ClothUsdError, OSError) as exc:
                 self.report({'ERROR'}, str(exc))
                 return {'CANCELLED'}

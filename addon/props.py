@@ -44,8 +44,8 @@ class ClothUsdPreferences(AddonPreferences):
     )
     models_dir: StringProperty(
         name="Model Bundles",
-        description="Folder of trained model bundles for the coarse and detail tiers "
-                    "(not read yet: cloth_usd ships no bundles so far)",
+        description="Folder of trained model bundles (or one bundle) for the coarse and detail "
+                    "tiers. Empty uses the bundles shipped with cloth_usd",
         subtype='DIR_PATH',
     )
 

@@ -30,6 +30,12 @@ def body_model(context) -> Path | None:
     return abspath(prefs.body_model) if prefs else None
 
 
+def models_dir(context) -> Path | None:
+    """The model bundle folder chosen in the preferences; None means cloth_usd's shipped ones."""
+    prefs = preferences(context)
+    return abspath(prefs.models_dir) if prefs and prefs.models_dir else None
+
+
 def output_paths(settings) -> tuple[Path, Path] | None:
     """``(cache layer, shot layer)`` a bake writes; None while no shot is chosen.
 

@@ -1,6 +1,6 @@
 """Frames per second of the ground-truth simulation (Newton VBD, self-contact, body collider).
 
-    python bench/bench_simulate.py [--vertices 3500] [--frames 3] [--substeps 10] [--iterations 10]
+    python bench/bench_simulate.py [--vertices 3500] [--frames 3] [--substeps 40] [--iterations 3]
 
 Runs on CUDA when present (and prints that number), otherwise on the CPU. The first
 simulated frame loads/compiles kernels and is excluded; frame 0 is the rest state.
@@ -22,8 +22,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--vertices", type=int, default=3500)
     ap.add_argument("--frames", type=int, default=3, help="timed frames after the warm-up frame")
-    ap.add_argument("--substeps", type=int, default=10)
-    ap.add_argument("--iterations", type=int, default=10)
+    ap.add_argument("--substeps", type=int, default=40)
+    ap.add_argument("--iterations", type=int, default=3)
     ap.add_argument("--collider-faces", type=int, default=6000, help="0: the full body mesh")
     ap.add_argument("--device", default="auto")
     args = ap.parse_args(argv)

@@ -38,13 +38,13 @@ import os
 import signal
 import threading
 import time
-import tomllib
 from collections import deque
 from dataclasses import dataclass, field
 from enum import Enum
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
+from .core.files import read_config
 from .errors import ArgumentError, ClothUsdError
 
 __all__ = ["Job", "JobStatus", "JobReport", "BatchReport", "load_jobs", "run_batch", "describe_jobs", "EXECUTORS",
@@ -178,10 +178,7 @@ def _entries_from_file(path: Path) -> tuple[list[dict], dict, str | None]:
     if path.suffix == ".txt":
         lines = (line.split("#", 1)[0].strip() for line in text.splitlines())
         return [{"stage": line} for line in lines if line], {}, None
-    try:
-        data = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-    except (tomllib.TOMLDecodeError, json.JSONDecodeError) as exc:
-        raise ArgumentError(f"{path}: not valid {path.suffix[1:].upper()} ({exc})") from None
+    data = read_config(path, "the job file", text=text)
     if isinstance(data, list):
         data = {"jobs": data}
     if not isinstance(data, dict):

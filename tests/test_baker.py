@@ -72,9 +72,13 @@ def test_garment_tier_override_is_honoured(tmp_path, character):
     stage.GetRootLayer().Save()
     from cloth_usd.errors import ArgumentError
 
+    (tmp_path / "no_bundles").mkdir()
     with pytest.raises(ArgumentError, match="/Char/Shirt: tier 'detail'"):
-        bake(scene, tmp_path / "a.usdc", tier="skinning")
+        bake(scene, tmp_path / "a.usdc", tier="skinning", models=tmp_path / "no_bundles")
     assert not (tmp_path / "a.usdc").exists()
+    pytest.importorskip("onnxruntime")
+    result = bake(scene, tmp_path / "a.usdc", tier="skinning", frames="1:2")  # the shipped bundle
+    assert result.garments[0].tier.value == "detail" and result.garments[0].bundle is not None
 
 
 def test_frame_ranges():

@@ -151,7 +151,7 @@ def test_contract_errors_are_one_line_and_write_nothing(tmp_path, capsys, edit, 
     (["--frames", "1050:1001"], "--frames '1050:1001': empty range"),
     (["--frames", "abc"], "--frames 'abc'"),
     (["--tier", "ultra"], "--tier 'ultra': unknown tier (valid: skinning, coarse, detail)"),
-    (["--tier", "detail"], "tier 'detail' needs a trained model bundle"),
+    (["--tier", "detail", "--models", "/no/such/bundles"], "--models /no/such/bundles: no such folder"),
     (["--garment", "/Nope"], "--garment /Nope: no garment"),
     (["--body-model", "/no/such/body.npz"], "/no/such/body.npz: body model file not found"),
 ])

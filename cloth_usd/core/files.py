@@ -3,9 +3,14 @@
 from __future__ import annotations
 
 import hashlib
+import json
+import tomllib
 from pathlib import Path
+from typing import Any
 
-__all__ = ["models_dir", "file_sha256"]
+from ..errors import ArgumentError
+
+__all__ = ["models_dir", "file_sha256", "read_config"]
 
 
 def models_dir() -> Path:
@@ -22,3 +27,24 @@ def file_sha256(path: str | Path) -> str:
         for block in iter(lambda: fh.read(1 << 20), b""):
             h.update(block)
     return h.hexdigest()
+
+
+def read_config(path: str | Path, what: str, *, text: str | None = None) -> Any:
+    """The content of a ``.toml`` file, or JSON for any other suffix.
+
+    Args:
+        what: what the file is, for error messages ("the data set config").
+        text: the file's text when the caller has read it already.
+    Raises:
+        ArgumentError: unreadable or malformed, naming the file.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text() if text is None else text
+    except OSError as exc:
+        raise ArgumentError(f"{path}: cannot read {what} ({exc.strerror})") from None
+    try:
+        return tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
+    except (ValueError, tomllib.TOMLDecodeError) as exc:
+        raise ArgumentError(f"{path}: not valid {path.suffix[1:].upper() if path.suffix == '.toml' else 'JSON'} "
+                            f"({exc})") from None

@@ -13,7 +13,6 @@ import dataclasses
 import hashlib
 import json
 import logging
-import tomllib
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,6 +21,7 @@ import numpy as np
 
 from ..core.association import associate
 from ..core.body import load_body_model, shape_body
+from ..core.files import read_config
 from ..core.fit import FitModel, common_anchors, fit_factor_analysis, pair_distances
 from ..errors import ArgumentError
 from .bodies import body_shapes
@@ -69,13 +69,9 @@ class FactoryConfig:
 def load_config(path: str | Path) -> FactoryConfig:
     """A FactoryConfig from ``.json`` or ``.toml``; unknown keys are an error naming them."""
     path = Path(path)
-    try:
-        text = path.read_text()
-        raw = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-    except OSError as exc:
-        raise ArgumentError(f"{path}: cannot read the data set config ({exc.strerror})") from exc
-    except (ValueError, tomllib.TOMLDecodeError) as exc:
-        raise ArgumentError(f"{path}: not valid {path.suffix[1:] or 'JSON'} ({exc})") from exc
+    raw = read_config(path, "the data set config")
+    if not isinstance(raw, dict):
+        raise ArgumentError(f"{path}: expected a table of FactoryConfig keys")
     known = {f.name for f in dataclasses.fields(FactoryConfig)}
     unknown = sorted(set(raw) - known)
     if unknown:

@@ -36,7 +36,6 @@ import math
 import os
 import tempfile
 import time
-import tomllib
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -47,7 +46,7 @@ import numpy as np
 import torch
 
 from ..core.body import BodyModel
-from ..core.files import file_sha256
+from ..core.files import file_sha256, read_config
 from ..core.graph import MeshGraph
 from ..errors import ArgumentError, ClothUsdError
 from ..runtime.io import COARSE_INPUTS, DETAIL_INPUTS, coarse_inputs, detail_inputs
@@ -165,13 +164,7 @@ def load_train_config(path: str | Path | None, **overrides: Any) -> TrainConfig:
     raw: dict = {}
     if path is not None:
         path = Path(path)
-        try:
-            text = path.read_text()
-            raw = tomllib.loads(text) if path.suffix == ".toml" else json.loads(text)
-        except OSError as exc:
-            raise ArgumentError(f"--config {path}: cannot read ({exc.strerror})") from exc
-        except (ValueError, tomllib.TOMLDecodeError) as exc:
-            raise ArgumentError(f"--config {path}: not valid {path.suffix[1:] or 'JSON'} ({exc})") from exc
+        raw = read_config(path, "the --config training config")
         if not isinstance(raw, dict):
             raise ArgumentError(f"--config {path}: expected a table of TrainConfig keys")
     raw.update({k: v for k, v in overrides.items() if v is not None})

@@ -293,7 +293,9 @@ def test_a_failed_bake_reports_one_line_and_leaves_the_scene_as_it_was(blender, 
         bpy.context.scene.cloth_usd.shot_path = str(target)
     elif case == "body_model":
         prefs.body_model = str(good.with_name("no_body.npz"))
-    elif case == "tier":
+    elif case == "tier":  # a Model Bundles folder without a T-shirt bundle
+        (good.parent / "bundles").mkdir(exist_ok=True)
+        prefs.models_dir = str(good.parent / "bundles")
         bpy.context.scene.cloth_usd.tier = "detail"
     elif case == "exists":
         target = shot("tube_z_cm")

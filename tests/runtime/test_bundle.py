@@ -100,3 +100,12 @@ def test_make_bundle_script(tmp_path, fake_exported, capsys):
     assert load_bundle(tmp_path / "out").manifest["metrics"] == {"coarse_mm": 3.0}
     assert script.main(argv) == 2  # the folder is not empty now
     assert "not empty" in capsys.readouterr().err
+
+
+def test_the_shipped_tshirt_bundle_verifies_and_records_its_evaluation():
+    from cloth_usd.runtime.bundle import default_bundle_dir, find_bundle
+
+    bundle = find_bundle("tshirt")
+    assert bundle is not None and bundle.path.parent == default_bundle_dir()
+    metrics = json.loads((bundle.path / "manifest.json").read_text())["metrics"]
+    assert metrics  # the evaluation the README quotes travels with the models
