@@ -9,7 +9,9 @@ that Blender does not ship, listed in the manifest's ``wheels`` so that Blender
 installs them with the extension (Blender 4.2+ extension wheels):
 
 - ``cloth_usd`` itself, built from this checkout (``pip wheel --no-deps .``);
-- scipy (platform wheels) and tqdm (pure Python), pinned below.
+- scipy (platform wheels) and tqdm (pure Python), pinned below;
+- onnxruntime (platform wheels) for the coarse and detail tiers: it imports with numpy
+  alone, so its other requirements (protobuf, sympy, ...: model tooling) are left out.
 
 Not bundled, because Blender has them: numpy (1.26.x in Blender 4.2 to 5.0) and
 ``pxr`` (Blender's own USD build; a second USD from usd-core in the same process would
@@ -36,7 +38,8 @@ BLENDER_PYTHON = "3.11"
 
 #: Third-party runtime dependencies of cloth_usd that Blender lacks (cloth_usd's
 #: pyproject asks scipy>=1.11, tqdm>=4.60; scipy 1.17 needs numpy>=1.26.4 as Blender has).
-BUNDLED = {"scipy": "1.17.1", "tqdm": "4.70.1"}
+#: onnxruntime 1.22 is the newest with a wheel for every platform below (macOS as universal2).
+BUNDLED = {"scipy": "1.17.1", "tqdm": "4.70.1", "onnxruntime": "1.22.0"}
 
 #: Blender platform -> pip ``--platform`` tags to ask for, and the test a wheel's
 #: platform tag must pass to serve that platform.
@@ -45,9 +48,9 @@ PLATFORMS = {
                   lambda tag: tag.startswith("manylinux") and tag.endswith("x86_64")),
     "windows-x64": (["win_amd64"], lambda tag: tag == "win_amd64"),
     "macos-arm64": (["macosx_14_0_arm64", "macosx_12_0_arm64", "macosx_11_0_arm64"],
-                    lambda tag: tag.startswith("macosx") and tag.endswith("arm64")),
+                    lambda tag: tag.startswith("macosx") and tag.endswith(("arm64", "universal2"))),
     "macos-x64": (["macosx_10_14_x86_64", "macosx_14_0_x86_64"],
-                  lambda tag: tag.startswith("macosx") and tag.endswith("x86_64")),
+                  lambda tag: tag.startswith("macosx") and tag.endswith(("x86_64", "universal2"))),
 }
 
 _EXCLUDE = {"__pycache__", "docs", "README.md"}
