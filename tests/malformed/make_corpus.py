@@ -504,7 +504,9 @@ def build_corpus(out_dir: str | Path) -> list[Case]:
     # (baker._resolve_tier has no file name to give), so the file is not asked for here.
     name = "tier_detail_authored"
     _edited_stage(folder(name), _attr(SHIRT, "cloth:tier", Sdf.ValueTypeNames.Token, "detail", uniform=True))
-    cases.append(Case(name, bake(name, f"{name}/scene.usda"), (f"{name}/scene.usda", SHIRT, "tier 'detail'", "model bundle")))
+    (root / name / "no_bundles").mkdir()  # a models folder without a T-shirt bundle
+    cases.append(Case(name, bake(name, f"{name}/scene.usda", "--models", f"{name}/no_bundles"),
+                      (f"{name}/scene.usda", SHIRT, "tier 'detail'", "model bundle")))
 
     # --- arguments
     def arg_case(name: str, extra: list[str], expect: tuple[str, ...], *, output: str | None = None) -> None:
@@ -512,8 +514,10 @@ def build_corpus(out_dir: str | Path) -> list[Case]:
         cases.append(Case(name, bake(name, good, *extra, output=output), expect))
 
     arg_case("tier_unknown", ["--tier", "ultra"], ("--tier 'ultra'", "skinning, coarse, detail"))
-    arg_case("tier_detail", ["--tier", "detail"], (SHIRT, "tier 'detail'", "model bundle"))
-    arg_case("tier_coarse", ["--tier", "coarse"], (SHIRT, "tier 'coarse'", "model bundle"))
+    for tier in ("detail", "coarse"):  # with a models folder that holds no T-shirt bundle
+        arg_case(f"tier_{tier}", ["--tier", tier, "--models", f"tier_{tier}/no_bundles"],
+                 (SHIRT, f"tier '{tier}'", "model bundle"))
+        (root / f"tier_{tier}" / "no_bundles").mkdir()
     arg_case("tier_empty", ["--tier", ""], ("--tier ''",))
     for label, text in (("words", "abc"), ("reversed", "1050:1001"), ("zero_step", "1001:1010:0"),
                         ("negative_step", "1001:1010:-1"), ("empty", ""), ("dots", "1.2.3:1005"),
