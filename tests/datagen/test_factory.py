@@ -70,3 +70,13 @@ def test_tiny_factory_run(tmp_path):
     assert png.stat().st_size > 1000
     assert main(["render", str(out / manifest["sequences"][kept[0]]["shard"]), "-o", str(png),
                  "--frames", "0,99"]) == 2  # out of range: one line, exit 2
+    # The training code reads what the factory wrote (Newton-simulated shards, fit.npz).
+    pytest.importorskip("torch")
+    from cloth_usd.core.body import load_body_model
+    from cloth_usd.nn.data import coarse_example, load_dataset
+
+    data = load_dataset(out, ["train"])
+    (clip, *_) = data.split("train")
+    example = coarse_example(load_body_model(), clip, np.arange(2))
+    assert example.features.shape[:2] == example.target.shape[:2] == (2, clip.rest_points.shape[0])
+    assert np.all(np.isfinite(example.features)) and np.all(np.isfinite(example.target))
