@@ -16,7 +16,7 @@ from .core.body import lbs, load_body_model, shape_body
 from .core.frames import canonical_motion
 from .errors import ClothUsdError
 
-__all__ = ["draw_panels", "render_frames", "render_shard"]
+__all__ = ["draw_panels", "posed_bodies", "render_frames", "render_shard"]
 
 BODY_RGB = (0.85, 0.68, 0.58)
 GARMENT_RGB = (0.25, 0.45, 0.75)
@@ -70,25 +70,42 @@ def draw_panels(panels: Sequence[tuple[str, list[tuple[np.ndarray, tuple[float, 
     return output
 
 
+def posed_bodies(stage, scene, times: Sequence[float], *, body_model: str | Path | None = None
+                 ) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Each character's body posed at some time codes, in cloth_usd's frame (Y-up metres).
+
+    Args:
+        stage: an open ``Usd.Stage``; scene: its :func:`~cloth_usd.usd.read.read_scene`.
+        times: (T,) time codes.
+    Returns:
+        per character ``(vertices (T, V, 3) float64 [m], faces (F, 3) int)``.
+    """
+    from .usd.read import read_motion
+
+    times = np.asarray(times, dtype=np.float64)
+    out = []
+    for char in scene.characters:
+        body = load_body_model(body_model, gender=char.gender)
+        v_shaped, joints = shape_body(body, char.betas)
+        motion = canonical_motion(char, read_motion(stage, char, times), joints)
+        out.append((lbs(body, v_shaped, joints, motion.poses, motion.transl)[0], body.faces))
+    return out
+
+
 def render_frames(stage_path: str | Path, frames: Sequence[float], output: str | Path, *,
                   body_model: str | Path | None = None, view: str = "three-quarter",
                   size: tuple[float, float] = (4.0, 5.0)) -> Path:
     """Draw body and garments at each frame side by side into one PNG."""
     from pxr import UsdGeom
 
-    from .usd.read import garment_from_internal, open_stage, read_motion, read_scene
+    from .usd.read import garment_from_internal, open_stage, read_scene
 
     if view not in _VIEWS:
         raise ClothUsdError(f"--view '{view}': unknown (valid: {', '.join(_VIEWS)})")
     stage = open_stage(stage_path)
     scene = read_scene(stage)
     times = np.asarray(frames, dtype=np.float64)
-    bodies = []  # per character: (T, F, 3, 3) posed body triangles, evaluated once
-    for char in scene.characters:
-        body = load_body_model(body_model, gender=char.gender)
-        v_shaped, joints = shape_body(body, char.betas)
-        motion = canonical_motion(char, read_motion(stage, char, times), joints)
-        bodies.append(lbs(body, v_shaped, joints, motion.poses, motion.transl)[0][:, body.faces])
+    bodies = [verts[:, faces] for verts, faces in posed_bodies(stage, scene, times, body_model=body_model)]
     panels = []
     for i, t in enumerate(times):
         meshes = [(tri[i], BODY_RGB) for tri in bodies]

@@ -65,19 +65,13 @@ def material(name: str, rgb) -> bpy.types.Material:
 
 def body_mesh(shot: Path, frame: float):
     """The posed body of the shot's character at ``frame`` (as make_render.py draws it)."""
-    import numpy as np
-    from cloth_usd.core.body import lbs, load_body_model, shape_body
-    from cloth_usd.core.frames import canonical_motion
-    from cloth_usd.usd.read import open_stage, read_motion, read_scene
+    from cloth_usd.render import posed_bodies
+    from cloth_usd.usd.read import open_stage, read_scene
 
     stage = open_stage(shot)
-    (char,) = read_scene(stage).characters
-    body = load_body_model(gender=char.gender)
-    v_shaped, joints = shape_body(body, char.betas)
-    motion = canonical_motion(char, read_motion(stage, char, np.array([frame])), joints)
-    verts = lbs(body, v_shaped, joints, motion.poses, motion.transl)[0][0]
+    ((verts, faces),) = posed_bodies(stage, read_scene(stage), [frame])
     mesh = bpy.data.meshes.new("Body")
-    mesh.from_pydata(verts.tolist(), [], body.faces.tolist())
+    mesh.from_pydata(verts[0].tolist(), [], faces.tolist())
     mesh.shade_smooth()
     ob = bpy.data.objects.new("Body", mesh)
     ob.rotation_euler = (1.5707963, 0.0, 0.0)  # Y-up metres -> Blender's Z-up

@@ -186,3 +186,11 @@ def test_python_api(tmp_path):
     result = cloth_usd.bake(WALK, tmp_path / "cache.usdc", frames="1001:1004")
     assert result.times.tolist() == [1001.0, 1002.0, 1003.0, 1004.0]
     assert result.garments[0].vertices == _rest(WALK, "/Character/Tshirt").shape[0]
+
+
+def test_render_draws_a_stage_and_names_a_bad_view(tmp_path, capsys):
+    png = tmp_path / "walk.png"
+    assert main(["render", str(WALK), "-o", str(png), "--frames", "1001,1030"]) == 0
+    assert png.stat().st_size > 1000
+    assert main(["render", str(WALK), "-o", str(png), "--frames", "1001", "--view", "top"]) == 2
+    assert "--view 'top': unknown" in capsys.readouterr().err

@@ -4,8 +4,8 @@
 
 Bakes samples/walk_tshirt with the add-on's operator (as an animator would), adds the
 body at the rendered frame (the stage has no body mesh; cloth_usd computes it), and
-renders with Cycles on the CPU. A UI screenshot is not possible here: bpy as a module
-runs in background mode, where Blender draws no windows.
+renders with Cycles on the CPU. bpy as a module draws no windows; the panel screenshot
+comes from scripts/screenshot_addon.sh.
 """
 
 import shutil
@@ -34,19 +34,13 @@ def enable_addon(tmp: Path) -> None:
 
 def body_mesh(shot: Path, frame: float):
     """The posed body of the shot's character at ``frame``, as a Blender object."""
-    from cloth_usd.core.body import lbs, load_body_model, shape_body
-    from cloth_usd.core.frames import canonical_motion
-    from cloth_usd.usd.read import open_stage, read_motion, read_scene
+    from cloth_usd.render import posed_bodies
+    from cloth_usd.usd.read import open_stage, read_scene
 
     stage = open_stage(shot)
-    scene = read_scene(stage)
-    (char,) = scene.characters
-    body = load_body_model(gender=char.gender)
-    v_shaped, joints = shape_body(body, char.betas)
-    motion = canonical_motion(char, read_motion(stage, char, np.array([frame])), joints)
-    verts = lbs(body, v_shaped, joints, motion.poses, motion.transl)[0][0]
+    ((verts, faces),) = posed_bodies(stage, read_scene(stage), [frame])
     mesh = bpy.data.meshes.new("Body")
-    mesh.from_pydata(verts.tolist(), [], body.faces.tolist())
+    mesh.from_pydata(verts[0].tolist(), [], faces.tolist())
     mesh.shade_smooth()
     ob = bpy.data.objects.new("Body", mesh)
     ob.rotation_euler = (np.pi / 2, 0.0, 0.0)  # cloth_usd's Y-up metres -> Blender's Z-up
