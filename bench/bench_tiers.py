@@ -280,49 +280,68 @@ def measure_error(bundles: dict[str, Path | None], rows: dict[tuple[str, str], R
     return info
 
 
-def torch_ratio(bundle_path: Path, *, graph, threads: int, batch_size: int = 1, repeats: int = 3) -> str:
-    """The detail model alone, onnxruntime vs torch eager at the bundle's width (random weights, best of
-    ``repeats``; batch 1 by default: torch eager's activations at batch 16 on a 4000-vertex shirt take
-    many GB)."""
+def _torch_model(bundle, tier: str):
+    """A random-weight torch model of the bundle's ``tier`` at its recorded config (width...)."""
+    from cloth_usd.nn.models import CoarseConfig, CoarseGenerator, DetailConfig, DetailGenerator, ParserConfig
+
+    config_type, model_type = (CoarseConfig, CoarseGenerator) if tier == "coarse" else (DetailConfig, DetailGenerator)
+    cfg = dict(bundle.manifest["models"][tier].get("config", {}))
+    if isinstance(cfg.get("parser"), dict):
+        cfg["parser"] = ParserConfig(**{k: tuple(v) if isinstance(v, list) else v for k, v in cfg["parser"].items()})
+    names = {f.name for f in fields(config_type)}
+    cfg = {k: tuple(v) if isinstance(v, list) else v for k, v in cfg.items() if k in names}
+    return model_type(config_type(**cfg)).eval(), cfg.get("width", 1.0)
+
+
+def torch_ratio(bundle_path: Path, *, graph, threads: int, batch_sizes: Sequence[int] = (1, 4),
+                repeats: int = 3) -> list[str]:
+    """Each model alone, torch eager vs onnxruntime at the bundle's widths (random weights, best
+    of ``repeats``), at each of ``batch_sizes`` frames per call (small: torch eager's
+    activations at batch 16 on a 4000-vertex shirt take many GB). One line per model and batch."""
     try:
         import torch
 
-        from cloth_usd.nn.models import DetailConfig, DetailGenerator, ParserConfig
-        from cloth_usd.runtime import DETAIL_INPUTS, detail_inputs
+        from cloth_usd.runtime import COARSE_INPUTS, DETAIL_INPUTS, coarse_inputs, detail_inputs
         from cloth_usd.runtime.bundle import load_bundle
     except ImportError as exc:
-        return f"detail onnxruntime / torch eager: n/a ({_reason(exc)})"
+        return [f"onnxruntime / torch eager: n/a ({_reason(exc)})"]
+    lines = []
     try:
         bundle = load_bundle(bundle_path)
-        if "detail" not in [t.value for t in bundle.tiers]:
-            return "detail onnxruntime / torch eager: n/a (the bundle has no detail model)"
-        cfg = dict(bundle.manifest["models"]["detail"].get("config", {}))
-        names = {f.name for f in fields(DetailConfig)}
-        if isinstance(cfg.get("parser"), dict):
-            cfg["parser"] = ParserConfig(**{k: tuple(v) if isinstance(v, list) else v
-                                            for k, v in cfg["parser"].items()})
-        cfg = {k: tuple(v) if isinstance(v, list) else v for k, v in cfg.items() if k in names}
         torch.set_num_threads(threads)
-        model = DetailGenerator(DetailConfig(**cfg)).eval()
         _cpu_sessions(bundle, threads)
-        session = bundle.session("detail")
-        rng = np.random.default_rng(0)
-        feed = detail_inputs(rng.normal(size=(batch_size, graph.num_vertices, 30)), rng.normal(size=(batch_size, 85)),
-                             graph)
-        args = [torch.from_numpy(feed[k]) for k in DETAIL_INPUTS]
-
-        def best(fn) -> float:
-            fn()
-            return min(_time_frames(fn, batch_size, repeats))
-
-        with torch.no_grad():
-            t_torch = best(lambda: model(*args))
-        t_ort = best(lambda: session.run(feed))
     except Exception as exc:  # noqa: BLE001
-        return f"detail onnxruntime / torch eager: n/a ({_reason(exc)})"
-    return (f"detail model only, torch eager / onnxruntime fp32 time: {t_torch / t_ort:.2f}x "
-            f"(torch {t_torch:.1f}, onnxruntime {t_ort:.1f} ms/frame, batch {batch_size}; "
-            f"target: onnxruntime never slower, i.e. >= 1)")
+        return [f"onnxruntime / torch eager: n/a ({_reason(exc)})"]
+    rng = np.random.default_rng(0)
+    for tier in [t.value for t in bundle.tiers]:
+        for batch in batch_sizes:
+            try:
+                model, width = _torch_model(bundle, tier)
+                n = graph.num_vertices
+                if tier == "coarse":
+                    feed, names = coarse_inputs(rng.normal(size=(batch, n, 7)), graph.table), COARSE_INPUTS
+                else:
+                    feed = detail_inputs(rng.normal(size=(batch, n, 30)), rng.normal(size=(batch, 85)), graph)
+                    names = DETAIL_INPUTS
+                session = bundle.session(tier)
+                args = [torch.from_numpy(feed[k]) for k in names]
+
+                def best(fn, frames=batch) -> float:
+                    fn()
+                    return min(_time_frames(fn, frames, repeats))
+
+                with torch.no_grad():
+                    t_torch = best(lambda: model(*args))
+                t_ort = best(lambda: session.run(feed))
+            except Exception as exc:  # noqa: BLE001
+                lines.append(f"{tier} onnxruntime / torch eager, batch {batch}: n/a ({_reason(exc)})")
+                continue
+            verdict = "met" if t_ort <= t_torch else "NOT met"
+            lines.append(f"{tier} model only (width {width:g}), batch {batch}: torch eager / onnxruntime fp32 "
+                         f"time {t_torch / t_ort:.2f}x (torch {t_torch:.1f}, onnxruntime {t_ort:.1f} ms/frame; "
+                         f"target onnxruntime never slower, >= 1: {verdict})")
+    bundle._sessions.clear()
+    return lines
 
 
 def pareto_front(rows: Sequence[Row]) -> list[Row]:
@@ -468,9 +487,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             speed, graph = measure_speed(paths, rows, vertices=a.vertices, frames=a.frames, repeats=a.repeats,
                                          threads=a.threads, batch_size=a.batch_size)
         if a.no_torch or graph is None:  # outside the BLAS limit: under it torch eager runs 10x slower
-            ratio = "detail onnxruntime / torch eager: skipped" + (" (--no-torch)" if a.no_torch else "")
+            ratio = ["onnxruntime / torch eager: skipped" + (" (--no-torch)" if a.no_torch else "")]
         else:
-            ratio = torch_ratio(bundle.path, graph=graph, threads=a.threads)
+            ratio = torch_ratio(bundle.path, graph=graph, threads=a.threads, batch_sizes=sorted({1, a.batch_size}))
         error_info = {}
         if a.data is not None:
             error_info = measure_error(paths, rows, a.data, a.out, max_frames=a.eval_frames, batch_size=a.batch_size)
@@ -486,7 +505,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     if inside:
         lines.append("ms/frame inside onnxruntime (the rest: body posing, features, post-process): "
                      + "; ".join(inside))
-    lines.append(ratio)
+    lines.extend(ratio)
     for name, tier, limit in (("detail", "detail", TARGET_DETAIL_MS), ("fast tier", "coarse", TARGET_FAST_MS)):
         done = [r for r in rows.values() if r.tier == tier and not r.na and not math.isnan(r.ms_per_frame)]
         if done:

@@ -18,11 +18,19 @@ def test_the_medium_data_set_plans_its_documented_sequences():
     assert len({j.garment_vertices.shape[0] for j in jobs}) > 6  # shirts differ in topology
 
 
+def test_the_large_data_set_adds_bodies_to_the_medium_one():
+    medium = {j.name for j in plan_jobs(load_config(CONFIGS / "datagen_medium.json"))}
+    jobs = plan_jobs(load_config(CONFIGS / "datagen_large.json"))
+    splits = [j.meta["split"] for j in jobs]
+    assert splits.count("train") == 72  # 6 shirts x 4 bodies x 3 motions, as in the README
+    assert medium - {j.name for j in jobs} <= {"val.shirt2.broad.walk-s101"}  # a resumable superset
+
+
 @pytest.mark.parametrize("name", ["coarse", "detail", "detail_nodec", "detail_noparser"])
 def test_training_configs_load(name):
     pytest.importorskip("torch")
     from cloth_usd.nn.train import load_train_config
 
     config = load_train_config(CONFIGS / f"train_{name}.json")
-    assert config.width == 0.125
+    assert config.width == (0.0625 if name == "coarse" else 0.125)  # the shipped bundle's widths
     assert config.decompose == (name != "detail_nodec") and config.use_parser == (name != "detail_noparser")

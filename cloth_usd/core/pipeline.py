@@ -32,7 +32,7 @@ from .graph import MeshGraph, build_graph
 from .postprocess import DEFAULT_MARGIN, push_out
 from .skinning import SkinBinding, bind_garment
 
-__all__ = ["GarmentPair", "PosedBody", "prepare_pair", "pose_body", "coarse_model_features",
+__all__ = ["GarmentPair", "BodyPatch", "body_patch", "PosedBody", "prepare_pair", "pose_body", "coarse_model_features",
            "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn"]
 
 #: A coarse model: ``(features (B, N, 7), graph) -> delta (B, N, 3) [m]``.
@@ -59,6 +59,8 @@ class GarmentPair:
     """The garment graph (neighbour table and one pooling level)."""
     alpha: np.ndarray
     """(F,) float64 the pair's fit attribute."""
+    patch: BodyPatch
+    """The body vertices the garment's features and post-process read."""
 
     @property
     def assoc_vertex(self) -> np.ndarray:
@@ -72,15 +74,39 @@ class GarmentPair:
 
 
 @dataclass(frozen=True)
+class BodyPatch:
+    """The part of the body one garment needs: its associated vertices and their one-ring.
+
+    Posing and normals only for these (a shirt reads ~2k of the body's 13k vertices); the
+    associated vertices' normals are exact, since every triangle around them is kept.
+    """
+
+    vertices: np.ndarray
+    """(V',) int64 body vertex indices, sorted."""
+    faces: np.ndarray
+    """(M', 3) int64 the body triangles touching an associated vertex, indexing ``vertices``."""
+    assoc: np.ndarray
+    """(N,) int64 each garment vertex's associated body vertex, indexing ``vertices``."""
+
+
+def body_patch(body_faces: np.ndarray, assoc_vertex: np.ndarray) -> BodyPatch:
+    """The :class:`BodyPatch` of a garment associated with ``assoc_vertex`` (N,) body vertices."""
+    faces = np.asarray(body_faces, dtype=np.int64)
+    assoc_vertex = np.asarray(assoc_vertex, dtype=np.int64)
+    used = np.zeros(int(faces.max(initial=-1)) + 1 if faces.size else 0, bool)
+    used[assoc_vertex[assoc_vertex < len(used)]] = True
+    ring = faces[used[faces].any(axis=1)] if faces.size else faces
+    vertices = np.union1d(np.unique(ring), assoc_vertex)
+    return BodyPatch(vertices=vertices, faces=np.searchsorted(vertices, ring),
+                     assoc=np.searchsorted(vertices, assoc_vertex))
+
+
+@dataclass(frozen=True)
 class PosedBody:
     """The body posed for a batch of frames, as the models' features need it."""
 
-    vertices: np.ndarray
-    """(T, V, 3) float64 posed body [m], world frame (``transl`` included)."""
     joints: np.ndarray
-    """(T, J, 3) float64 posed joints [m], same frame."""
-    normals: np.ndarray
-    """(T, V, 3) float64 unit body normals."""
+    """(T, J, 3) float64 posed joints [m], world frame (``transl`` included)."""
     garment_points: np.ndarray
     """(T, N, 3) float64 each garment vertex's associated posed body vertex [m] (``I M_b``)."""
     garment_normals: np.ndarray
@@ -108,7 +134,7 @@ def prepare_pair(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray, fa
     d = pair_distances(rest_points, binding.association, v_shaped, fit.anchors)
     alpha = np.asarray(fit.transform(d), dtype=np.float64)
     return GarmentPair(betas=betas, faces=faces, binding=binding, v_shaped=v_shaped, joints=joints,
-                       graph=graph, alpha=alpha)
+                       graph=graph, alpha=alpha, patch=body_patch(body.faces, binding.association.vertex))
 
 
 def pose_body(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray) -> PosedBody:
@@ -118,16 +144,16 @@ def pose_body(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
         poses: (T, 72) axis-angle [rad], canonical body frame.
         transl: (T, 3) root translation [m].
     """
-    verts, joints = lbs(body, pair.v_shaped, pair.joints, poses, transl)
-    normals = vertex_normals(verts, body.faces)
-    idx = pair.assoc_vertex
-    return PosedBody(vertices=verts, joints=joints, normals=normals, garment_points=verts[:, idx],
-                     garment_normals=normals[:, idx])
+    patch = pair.patch
+    verts, joints = lbs(body, pair.v_shaped, pair.joints, poses, transl, vertices=patch.vertices)
+    normals = vertex_normals(verts, patch.faces)
+    return PosedBody(joints=joints, garment_points=verts[:, patch.assoc], garment_normals=normals[:, patch.assoc])
 
 
 def coarse_model_features(pair: GarmentPair, posed: PosedBody, transl: np.ndarray) -> np.ndarray:
     """(T, N, 7) float64 coarse node features (:func:`~cloth_usd.core.features.coarse_features`)."""
-    return coarse_features(posed.vertices, posed.normals, pair.assoc_vertex, transl, pair.alpha[0])
+    return coarse_features(posed.garment_points, posed.garment_normals, np.arange(pair.num_vertices), transl,
+                           pair.alpha[0])
 
 
 def detail_model_inputs(pair: GarmentPair, coarse_points: np.ndarray, posed: PosedBody, poses: np.ndarray,

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .association import Association, associate
-from .body import BodyModel, joint_transforms, pose_feature, shape_body
+from .body import BodyModel, blend_skin, joint_transforms, pose_feature, shape_body
 from .rotations import axis_angle_to_matrix
 from .smpl import NUM_JOINTS
 
@@ -70,6 +70,4 @@ def skin_garment(binding: SkinBinding, poses: np.ndarray, transl: np.ndarray,
     rest = np.broadcast_to(binding.rest_points, (rotmats.shape[0],) + binding.rest_points.shape)
     if binding.posedirs is not None:
         rest = rest + np.einsum("ncp,tp->tnc", binding.posedirs, pose_feature(rotmats))
-    blended = np.einsum("nj,tjab->tnab", binding.weights, skin)
-    out = np.einsum("tnab,tnb->tna", blended[..., :3], rest) + blended[..., 3]
-    return out + np.asarray(transl, dtype=np.float64)[:, None, :]
+    return blend_skin(binding.weights, skin, rest) + np.asarray(transl, dtype=np.float64)[:, None, :]

@@ -19,6 +19,7 @@ from torch.nn import functional as fn
 __all__ = [
     "GATBlock",
     "masked_softmax",
+    "MASKED_LOGIT",
     "gather_nodes",
     "pool_mean",
     "unpool",
@@ -26,32 +27,46 @@ __all__ = [
 ]
 
 
+#: Exported blocks with fewer features per head than this spread the attention weights over
+#: each head's features with a matrix product (onnxruntime broadcasts over a short inner axis
+#: slowly); torch eager, and wider heads, broadcast (``bench/bench_layers.py`` measures both).
+SPREAD_BELOW = 16
+#: Added to the logits of masked slots: far below any real attention logit, far above
+#: float32's lowest value (so ``logit + MASKED_LOGIT`` never overflows to -inf).
+MASKED_LOGIT = -1e30
+
+
 def gather_nodes(x: torch.Tensor, index: torch.Tensor) -> torch.Tensor:
-    """Gather node rows by an index table (one flat ONNX ``Gather`` on axis 1, then reshape).
+    """Gather node rows by an index table, slot-major (one flat ONNX ``Gather`` on axis 1).
+
+    The table is read column by column, so the result's slot axis comes before the node
+    axis: every later elementwise op and every reduction over the slots then works on
+    contiguous (R, F) planes, which onnxruntime runs several times faster than a
+    reduction over a short inner axis (``bench/bench_layers.py``).
 
     Shapes:
-        x: (B, N, F...); index: (R, C) int64 in [0, N) -> (B, R, C, F...).
+        x: (B, N, F...); index: (R, C) int64 in [0, N) -> (B, C, R, F...).
     """
-    flat = torch.index_select(x, 1, index.reshape(-1))
-    return flat.reshape(x.shape[0], index.shape[0], index.shape[1], *x.shape[2:])
+    flat = torch.index_select(x, 1, index.t().reshape(-1))
+    return flat.reshape(x.shape[0], index.shape[1], index.shape[0], *x.shape[2:])
 
 
 def masked_softmax(scores: torch.Tensor, mask: torch.Tensor, dim: int) -> torch.Tensor:
     """Softmax over ``dim`` restricted to ``mask``; an all-masked row gives zeros, never NaN.
 
-    The max is taken over valid entries only (invalid ones are set to the dtype's lowest
-    value first), so ``exp`` never overflows; every valid row's sum is then >= 1 (its max
-    entry contributes exp(0)), so dividing by ``sum.clamp_min(1)`` is exact for valid rows
-    and turns an empty row into 0 / 1 without an epsilon.
+    Masked logits get :data:`MASKED_LOGIT` added, so the max over the row is a valid
+    entry's whenever the row has one and ``exp`` never overflows; masked entries then
+    underflow to exactly 0. A row with no valid entry is multiplied by 0 at the end
+    (its sum is >= 1, so the division is always safe) -- no epsilon anywhere.
 
     Shapes:
-        scores: (..., K, ...); mask: broadcastable to scores, bool -> same as scores.
+        scores: (..., K, ...); mask: bool, broadcastable to scores with as many dimensions
+            (``dim`` names the same axis of both) -> same as scores.
     """
-    low = torch.finfo(scores.dtype).min
-    s = torch.where(mask, scores, torch.full_like(scores, low))
-    peak = s.amax(dim=dim, keepdim=True)
-    e = torch.exp(s - peak) * mask.to(scores.dtype)
-    return e / e.sum(dim=dim, keepdim=True).clamp_min(1.0)
+    valid = mask.to(scores.dtype)
+    s = scores + (1.0 - valid) * MASKED_LOGIT
+    e = torch.exp(s - s.amax(dim=dim, keepdim=True))
+    return e * (valid.amax(dim=dim, keepdim=True) / e.sum(dim=dim, keepdim=True))
 
 
 class GATBlock(nn.Module):
@@ -61,6 +76,13 @@ class GATBlock(nn.Module):
     neighbours j of i, per head h: ``sum_j softmax_j(LeakyReLU(a_dst.h_i + a_src.h_j)) h_j``
     (H x A)). The node itself is not among its attention neighbours: the self stream
     carries it. An isolated node aggregates nothing (zeros + bias).
+
+    The forward runs one matrix product for the self stream, the head features and both
+    attention logits (``a . W x`` is ``(a W) x``: the attention vectors are folded into
+    the projection) and gathers slot-major (:func:`gather_nodes`); in an ONNX export with
+    narrow heads it spreads the per-head weights over each head's features with a product
+    by a 0/1 matrix instead of a broadcast (:data:`SPREAD_BELOW`). Same function and parameters as the textbook form
+    (:func:`gat_scatter_reference` checks it in the tests).
 
     Shapes:
         x: (B, N, F_in); nbr: (N, K) int64; mask: (N, K) bool -> (B, N, S + H * A).
@@ -81,6 +103,8 @@ class GATBlock(nn.Module):
         self.bias = nn.Parameter(torch.zeros(heads * head_features))
         nn.init.xavier_uniform_(self.att_src)
         nn.init.xavier_uniform_(self.att_dst)
+        spread = torch.repeat_interleave(torch.eye(heads), head_features, dim=1)
+        self.register_buffer("spread", spread, persistent=False)  # (H, H * A) 0/1
 
     @property
     def out_features(self) -> int:
@@ -88,7 +112,7 @@ class GATBlock(nn.Module):
         return self.self_features + self.heads * self.head_features
 
     def project(self, x: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Per-node head features and the two attention logits.
+        """Per-node head features and the two attention logits (textbook form).
 
         Shapes:
             x: (B, N, F_in) -> h (B, N, H, A), src (B, N, H), dst (B, N, H).
@@ -97,11 +121,20 @@ class GATBlock(nn.Module):
         return h, (h * self.att_src).sum(-1), (h * self.att_dst).sum(-1)
 
     def forward(self, x: torch.Tensor, nbr: torch.Tensor, mask: torch.Tensor) -> torch.Tensor:
-        h, src, dst = self.project(x)
-        scores = fn.leaky_relu(dst.unsqueeze(2) + gather_nodes(src, nbr), self.negative_slope)  # (B,N,K,H)
-        w = masked_softmax(scores, mask.unsqueeze(-1), dim=2)
-        agg = (w.unsqueeze(-1) * gather_nodes(h, nbr)).sum(2)  # (B,N,H,A)
-        return torch.cat([self.self_lin(x), agg.flatten(-2) + self.bias], dim=-1)
+        s, ha, heads = self.self_features, self.heads * self.head_features, self.heads
+        w = self.lin.weight.unflatten(0, (heads, self.head_features))  # (H, A, F_in)
+        weight = torch.cat([self.self_lin.weight, self.lin.weight,
+                            (self.att_src.unsqueeze(-1) * w).sum(1), (self.att_dst.unsqueeze(-1) * w).sum(1)])
+        bias = torch.cat([self.self_lin.bias, self.self_lin.bias.new_zeros(ha + 2 * heads)])
+        y = fn.linear(x, weight, bias)  # (B, N, S + HA + 2H)
+        own, h, src, dst = y.split([s, ha, heads, heads], dim=-1)
+        scores = fn.leaky_relu(dst.unsqueeze(1) + gather_nodes(src, nbr), self.negative_slope)  # (B,K,N,H)
+        att = masked_softmax(scores, mask.t()[None, :, :, None], dim=1)
+        if self.head_features < SPREAD_BELOW and torch.onnx.is_in_onnx_export():
+            agg = (torch.matmul(att, self.spread) * gather_nodes(h, nbr)).sum(1)  # (B,N,HA)
+        else:
+            agg = (att.unsqueeze(-1) * gather_nodes(h.unflatten(-1, (heads, -1)), nbr)).sum(1).flatten(-2)
+        return torch.cat([own, agg + self.bias], dim=-1)
 
 
 def gat_scatter_reference(block: GATBlock, x: torch.Tensor, edges: torch.Tensor) -> torch.Tensor:
@@ -131,9 +164,9 @@ def pool_mean(x: torch.Tensor, members: torch.Tensor, members_mask: torch.Tensor
     Shapes:
         x: (B, N, F); members: (N2, P) int64; members_mask: (N2, P) bool -> (B, N2, F).
     """
-    m = members_mask.to(x.dtype)
-    total = (gather_nodes(x, members) * m.unsqueeze(-1)).sum(2)
-    return total / m.sum(1).clamp_min(1.0).unsqueeze(-1)
+    m = members_mask.t().to(x.dtype).unsqueeze(-1)  # (P, N2, 1)
+    total = (gather_nodes(x, members) * m).sum(1)
+    return total / m.sum(0).clamp_min(1.0)
 
 
 def unpool(x: torch.Tensor, cluster: torch.Tensor) -> torch.Tensor:

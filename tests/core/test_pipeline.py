@@ -1,0 +1,52 @@
+"""core.pipeline: the body patch a garment reads gives what the whole posed body gives."""
+
+import numpy as np
+import pytest
+
+from cloth_usd.core.body import body_model_from_arrays, lbs, load_body_model, shape_body
+from cloth_usd.core.features import vertex_normals
+from cloth_usd.core.pipeline import body_patch, coarse_model_features, pose_body, prepare_pair
+from cloth_usd.datagen import TShirtParams, make_tshirt, walk_cycle
+from cloth_usd.runtime.bundle import find_bundle
+from tests.conftest import tiny_body_arrays
+
+
+
+@pytest.mark.parametrize("posedirs", [False, True], ids=["embedded", "with-posedirs"])
+def test_lbs_on_a_vertex_subset_equals_the_full_pose(posedirs):
+    body = body_model_from_arrays(tiny_body_arrays(num_vertices=64)) if posedirs else load_body_model()
+    v_shaped, joints = shape_body(body, np.linspace(-1, 1, 10))
+    poses, transl = walk_cycle(3)
+    full, full_joints = lbs(body, v_shaped, joints, poses, transl)
+    idx = np.array([0, 17, 40, body.num_vertices - 1])
+    sub, sub_joints = lbs(body, v_shaped, joints, poses, transl, vertices=idx)
+    np.testing.assert_allclose(sub, full[:, idx], atol=1e-12)
+    np.testing.assert_allclose(sub_joints, full_joints)
+
+
+def test_body_patch_keeps_every_triangle_around_an_associated_vertex():
+    faces = np.array([[0, 1, 2], [0, 2, 3], [3, 4, 5], [5, 6, 7]])
+    patch = body_patch(faces, np.array([2, 2, 0]))
+    np.testing.assert_array_equal(patch.vertices, [0, 1, 2, 3])
+    np.testing.assert_array_equal(patch.vertices[patch.faces], faces[:2])
+    np.testing.assert_array_equal(patch.vertices[patch.assoc], [2, 2, 0])
+
+
+def test_posed_patch_matches_the_whole_posed_body():
+    body = load_body_model()
+    betas = np.zeros(10)
+    betas[:2] = (1.5, -1.0)
+    rest, faces = make_tshirt(body, betas, TShirtParams(target_vertices=600))
+    pair = prepare_pair(body, betas, rest, faces, find_bundle("tshirt").fit)  # the shipped fit model
+    poses, transl = walk_cycle(4)
+    posed = pose_body(body, pair, poses, transl)
+    assert len(pair.patch.vertices) < body.num_vertices
+    verts, joints = lbs(body, pair.v_shaped, pair.joints, poses, transl)
+    normals = vertex_normals(verts, body.faces)
+    idx = pair.assoc_vertex
+    np.testing.assert_allclose(posed.garment_points, verts[:, idx], atol=1e-12)
+    np.testing.assert_allclose(posed.garment_normals, normals[:, idx], atol=1e-12)
+    np.testing.assert_allclose(posed.joints, joints)
+    feats = coarse_model_features(pair, posed, transl)
+    np.testing.assert_allclose(feats[..., :3], normals[:, idx], atol=1e-12)
+    np.testing.assert_allclose(feats[..., 3:6], verts[:, idx] - transl[:, None], atol=1e-12)
