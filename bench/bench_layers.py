@@ -3,8 +3,8 @@
 On a garment-sized grid (default 63 x 64 = 4032 vertices), prints median ms per forward
 (batch 1) for:
 
-- the coarse and detail generators at the paper's widths and at ``--width`` (the shipped
-  bundle's): torch eager vs onnxruntime (the issue's target: onnxruntime never slower);
+- the coarse and detail generators at the paper's widths and at ``--width`` (default the
+  shipped detail model's): torch eager vs onnxruntime (the issue's target: onnxruntime never slower);
 - one GAT block at widths 256 and 64 (32 and 8 features per head) in three forms, each in
   torch eager and exported to onnxruntime, with the export's max error against torch:
   the layer as shipped (slot-major padded table, :class:`cloth_usd.nn.layers.GATBlock`),
@@ -166,7 +166,7 @@ def main() -> None:
     p.add_argument("--repeats", type=int, default=7)
     p.add_argument("--nx", type=int, default=63)
     p.add_argument("--ny", type=int, default=64)
-    p.add_argument("--width", type=float, default=0.125, help="the shipped models' width multiplier")
+    p.add_argument("--width", type=float, default=0.125, help="a reduced width to compare (default: the shipped detail model's)")
     a = p.parse_args()
     warnings.filterwarnings("ignore")
     torch.set_num_threads(a.threads)

@@ -220,22 +220,27 @@ def pick_device(name: str | None) -> torch.device:
 
 
 class _Tensors:
-    """Named model inputs as tensors on one device; graph tensors are moved once per graph."""
+    """Named model inputs as tensors on one device; graph tensors are moved once per graph.
+
+    The cache holds each graph it keys by ``id``, so a freed graph's id can never be
+    reused by another garment's graph while its tensors are cached.
+    """
 
     def __init__(self, device: torch.device) -> None:
         self.device = device
-        self._graphs: dict[tuple[int, str], torch.Tensor] = {}
+        self._graphs: dict[int, tuple[MeshGraph, dict[str, torch.Tensor]]] = {}
 
     def __call__(self, inputs: Mapping[str, np.ndarray], graph: MeshGraph, names: Sequence[str]) -> list:
+        held, cached = self._graphs.setdefault(id(graph), (graph, {}))
+        assert held is graph
         out = []
         for name in names:
             if name in ("features", "attributes"):
                 out.append(torch.from_numpy(inputs[name]).to(self.device))
                 continue
-            key = (id(graph), name)
-            if key not in self._graphs:
-                self._graphs[key] = torch.from_numpy(inputs[name]).to(self.device)
-            out.append(self._graphs[key])
+            if name not in cached:
+                cached[name] = torch.from_numpy(inputs[name]).to(self.device)
+            out.append(cached[name])
         return out
 
 

@@ -165,3 +165,29 @@ def test_exported_bundle_runs_like_the_torch_models(tmp_path_factory):
         got = learned.evaluate(tier, clip.poses, clip.transl).points
         want, _ = run_tiers(ds.body, clip.pair, clip.poses, clip.transl, *fns)
         np.testing.assert_allclose(got, want, atol=1e-4, rtol=0)
+
+
+def test_graph_tensor_cache_pins_its_graphs():
+    """Evaluation makes one graph per clip and drops it; a new graph could get a dead one's
+    id, and an id-keyed cache would hand it the old garment's tables (seen: an index out of
+    bounds in the ablation runs). The cache keeps its graphs alive, so ids stay unique."""
+    import gc
+    import weakref
+
+    from meshes import grid
+
+    from cloth_usd.core.graph import build_graph
+    from cloth_usd.nn.train import _Tensors
+    from cloth_usd.runtime.io import COARSE_INPUTS, coarse_inputs
+
+    tensors = _Tensors(torch.device("cpu"))
+    refs = []
+    for nx in (4, 5, 6, 7):  # garments of different sizes, each graph dropped after use
+        faces, pos = grid(nx, 3)
+        graph = build_graph(faces, pos)
+        nbr = tensors(coarse_inputs(np.zeros((1, len(pos), 7)), graph.table), graph, COARSE_INPUTS)[1]
+        assert nbr.shape[0] == len(pos) and int(nbr.max()) < len(pos)
+        refs.append(weakref.ref(graph))
+        del graph
+        gc.collect()
+    assert all(r() is not None for r in refs)
