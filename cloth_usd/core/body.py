@@ -11,6 +11,7 @@ from __future__ import annotations
 import logging
 import zipfile
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -70,6 +71,12 @@ class BodyModel:
     """The file it was read from."""
     sha256: str = ""
     """sha256 of that file."""
+
+    @cached_property
+    def sparse_weights(self) -> sparse.csr_matrix:
+        """:attr:`weights` as a sparse matrix (a vertex has few joints), made once: what
+        :func:`blend_skin` multiplies by."""
+        return sparse.csr_matrix(self.weights)
 
     @property
     def num_vertices(self) -> int:
@@ -266,7 +273,8 @@ def blend_skin(weights: np.ndarray, skin: np.ndarray, points: np.ndarray) -> np.
     (in a coarse bake, onnxruntime took 20.8 ms/frame after a dense product, 10.4 after this one).
 
     Args:
-        weights: (V, J) skinning weights; skin: (T, J, 3, 4) joint transforms;
+        weights: (V, J) skinning weights, dense or (better, made once) scipy sparse;
+        skin: (T, J, 3, 4) joint transforms;
         points: (T, V, 3) or (V, 3) rest points [m].
     Returns:
         (T, V, 3) skinned points [m].
@@ -293,7 +301,7 @@ def lbs(body: BodyModel, v_shaped: np.ndarray, joints: np.ndarray, poses: np.nda
     Returns:
         ``(vertices (T, V or V', 3) [m], posed joints (T, J, 3) [m])``, both with ``transl``.
     """
-    weights, posedirs = body.weights, body.posedirs
+    weights, posedirs = body.sparse_weights, body.posedirs
     if vertices is not None:
         idx = np.asarray(vertices, dtype=np.int64)
         v_shaped, weights = v_shaped[idx], weights[idx]

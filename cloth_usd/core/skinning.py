@@ -9,8 +9,10 @@ must beat this baseline. Shape letters: T frames, N garment vertices, J joints.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
+from scipy import sparse
 
 from .association import Association, associate
 from .body import BodyModel, blend_skin, joint_transforms, pose_feature, shape_body
@@ -33,6 +35,11 @@ class SkinBinding:
     """(N, J) float64 interpolated skinning weights, rows sum to 1."""
     posedirs: np.ndarray | None
     """(N, 3, 207) float64 interpolated pose correctives [m], None when the body has none."""
+
+    @cached_property
+    def sparse_weights(self) -> sparse.csr_matrix:
+        """:attr:`weights` as a sparse matrix, made once: what :func:`skin_garment` multiplies by."""
+        return sparse.csr_matrix(self.weights)
 
 
 def bind_garment(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray) -> SkinBinding:
@@ -70,4 +77,4 @@ def skin_garment(binding: SkinBinding, poses: np.ndarray, transl: np.ndarray,
     rest = np.broadcast_to(binding.rest_points, (rotmats.shape[0],) + binding.rest_points.shape)
     if binding.posedirs is not None:
         rest = rest + np.einsum("ncp,tp->tnc", binding.posedirs, pose_feature(rotmats))
-    return blend_skin(binding.weights, skin, rest) + np.asarray(transl, dtype=np.float64)[:, None, :]
+    return blend_skin(binding.sparse_weights, skin, rest) + np.asarray(transl, dtype=np.float64)[:, None, :]
