@@ -31,6 +31,8 @@ sys.dont_write_bytecode = True  # no Python 3.13 caches in the checkout
 sys.path.insert(0, str(ROOT))  # cloth_usd from this checkout
 if os.environ.get("CLOTH_USD_SITE"):  # usd-core for this Blender's Python
     sys.path.insert(0, os.environ["CLOTH_USD_SITE"])
+sys.path.insert(0, str(ROOT / "addon" / "docs"))
+from make_render import body_mesh  # noqa: E402  the body as the Cycles render draws it
 
 # The shell script takes the picture (X's own screenshot, xwd: Blender's screenshot
 # operators read back black under Xvfb's software GL): READY says the UI is drawn and
@@ -61,22 +63,6 @@ def material(name: str, rgb) -> bpy.types.Material:
     mat = bpy.data.materials.new(name)
     mat.diffuse_color = (*rgb, 1.0)  # what the Solid view draws with color_type MATERIAL
     return mat
-
-
-def body_mesh(shot: Path, frame: float):
-    """The posed body of the shot's character at ``frame`` (as make_render.py draws it)."""
-    from cloth_usd.render import posed_bodies
-    from cloth_usd.usd.read import open_stage, read_scene
-
-    stage = open_stage(shot)
-    ((verts, faces),) = posed_bodies(stage, read_scene(stage), [frame])
-    mesh = bpy.data.meshes.new("Body")
-    mesh.from_pydata(verts[0].tolist(), [], faces.tolist())
-    mesh.shade_smooth()
-    ob = bpy.data.objects.new("Body", mesh)
-    ob.rotation_euler = (1.5707963, 0.0, 0.0)  # Y-up metres -> Blender's Z-up
-    bpy.context.scene.collection.objects.link(ob)
-    return ob
 
 
 def cache_mesh_fallback(shot_layer: Path, prim_path: str, frame: float):
