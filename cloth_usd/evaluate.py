@@ -125,6 +125,9 @@ def _ablation_label(run) -> str:
     c = run.config
     parts = [p for p, off in (("no decomposition", not c.decompose),
                               ("no parser", run.tier.value == "detail" and not c.use_parser)) if off]
+    if run.tier.value == "coarse":  # coarse runs differ in what they learn: say it
+        parts += [f"{c.coarse_base.value} base", "Taubin target" if c.coarse_target.value == "taubin"
+                  else "Laplacian target"]
     what = ", ".join(parts) if parts else f"run {run.path.name}"
     return f"{run.tier.value} ({what})"
 
@@ -191,6 +194,7 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         log.warning("%s: the bundle was trained on another data set (manifest sha256 %s...)", data_dir,
                     str(trained_on)[:12])
     runs = []
+    bases: dict[str, str] = {}
     ablations: dict[str, dict] = {}
     if ablation_runs:
         from .nn.train import BEST, load_run, pick_device, torch_coarse_fn, torch_detail_fn
@@ -212,6 +216,7 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
                 if shipped and used != shipped:
                     log.warning("%s: trained on another coarse model than the bundle's", run.path)
             ablations[label] = record
+            bases[label] = run.config.coarse_base
             runs.append((label, run.tier.value, fn))
     shipped_coarse = _session_coarse_fn(bundle_obj.session("coarse"))
     tiers = ["skinning", "coarse"] + (["detail"] if "detail" in [t.value for t in bundle_obj.tiers] else []) \
@@ -244,10 +249,12 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         for label_, tier, fn in runs:
             if tier == "detail":
                 outputs[label_] = run_tiers(body, learned.pair, clip.poses, clip.transl, shipped_coarse, fn,
-                                            batch_size=batch_size, margin=learned.margin)[0]
+                                            batch_size=batch_size, margin=learned.margin,
+                                            coarse_base=bundle_obj.coarse_base)[0]
             else:
                 outputs[label_] = run_tiers(body, learned.pair, clip.poses, clip.transl, fn,
-                                            batch_size=batch_size, margin=learned.margin)[0]
+                                            batch_size=batch_size, margin=learned.margin,
+                                            coarse_base=bases[label_])[0]
         for tier, pts in outputs.items():
             err = np.linalg.norm(pts - truth, axis=-1) * 1000.0
             for key, _ in keys:
@@ -268,7 +275,7 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
     metrics = {
         "format": REPORT_FORMAT,
         "bundle": {"path": str(Path(bundle).resolve()), "name": bundle_obj.name, "sha256": bundle_obj.sha256,
-                   "files": dict(bundle_obj.manifest["files"])},
+                   "files": dict(bundle_obj.manifest["files"]), "coarse_base": bundle_obj.coarse_base.value},
         "data": {"path": str(Path(data_dir).resolve()), "manifest_sha256": data.manifest_sha256,
                  "same_as_training": trained_on == data.manifest_sha256, "max_frames": max_frames},
         "error": "Euclidean distance of each garment vertex to the simulated one, every frame [mm]; "
@@ -299,6 +306,8 @@ def _markdown(metrics: dict) -> str:
         f"- bundle: `{b['path']}` (manifest sha256 `{b['sha256'][:16]}...`)",
         f"- data: `{d['path']}` (manifest sha256 `{d['manifest_sha256'][:16]}...`; "
         f"{'the data set the bundle was trained on' if d['same_as_training'] else 'NOT the bundle training data set'})",
+        f"- coarse model: displacement added to "
+        f"{'the skinned garment' if b.get('coarse_base') == 'skinned' else 'the associated body vertices (I M_b)'}",
         f"- error: {metrics['error']}",
         f"- histograms: {metrics['histogram_bin_mm']} mm bins (`histograms.png`, `histograms.npz`)",
     ]

@@ -26,11 +26,15 @@ def test_the_large_data_set_adds_bodies_to_the_medium_one():
     assert medium - {j.name for j in jobs} <= {"val.shirt2.broad.walk-s101"}  # a resumable superset
 
 
-@pytest.mark.parametrize("name", ["coarse", "detail", "detail_nodec", "detail_noparser"])
+@pytest.mark.parametrize("name", ["coarse", "coarse_taubin", "coarse_skinned", "coarse_skinned_laplacian", "detail",
+                                  "detail_nodec", "detail_noparser"])
 def test_training_configs_load(name):
     pytest.importorskip("torch")
     from cloth_usd.nn.train import load_train_config
 
     config = load_train_config(CONFIGS / f"train_{name}.json")
-    assert config.width == (0.0625 if name == "coarse" else 0.125)  # the shipped bundle's widths
+    assert config.width == (0.0625 if name.startswith("coarse") else 0.125)  # the shipped bundle's widths
     assert config.decompose == (name != "detail_nodec") and config.use_parser == (name != "detail_noparser")
+    # train_coarse.json is METHOD.md's form; the shipped coarse model is train_coarse_skinned.json
+    assert config.coarse_base.value == ("skinned" if name.startswith("coarse_skinned") else "body")
+    assert config.coarse_target.value == ("taubin" if name in ("coarse_taubin", "coarse_skinned") else "stored")

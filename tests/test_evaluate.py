@@ -73,6 +73,7 @@ def test_evaluate_writes_report_with_every_tier(tmp_path_factory, tmp_path):
     tiers = ["skinning", "coarse", "detail", "detail (no decomposition)", "detail (no parser)"]
     assert metrics["tiers"] == tiers
     assert metrics["data"]["same_as_training"] is True
+    assert metrics["bundle"]["coarse_base"] == "body"  # the tiny runs train METHOD.md's form
     assert all(a["coarse_matches_bundle"] for a in metrics["ablations"].values())
     keys = [r["key"] for r in metrics["rows"]]
     assert keys == ["test_body", "test_garment", "test_motion", "all"]
@@ -81,6 +82,23 @@ def test_evaluate_writes_report_with_every_tier(tmp_path_factory, tmp_path):
     hist = np.load(out / "histograms.npz")
     assert hist["all|detail"].sum() == metrics["rows"][-1]["vertex_frames"]
     report = (out / "report.md").read_text()
-    for text in ["unseen bodies (all)", "unseen shirts (all)", "unseen motions (all)", *tiers]:
+    for text in ["unseen bodies (all)", "unseen shirts (all)", "unseen motions (all)", "(I M_b)", *tiers]:
         assert text in report
     assert (out / "histograms.png").stat().st_size > 0 and (out / "means.png").stat().st_size > 0
+
+
+def test_ablation_labels_say_what_differs():
+    pytest.importorskip("torch")
+    from types import SimpleNamespace
+
+    from cloth_usd.evaluate import _ablation_label
+    from cloth_usd.nn.train import Tier, TrainConfig
+
+    def run(tier, **config):
+        return SimpleNamespace(tier=Tier(tier), config=TrainConfig(**config), path=Path("runs/x"))
+
+    assert _ablation_label(run("detail", use_parser=False)) == "detail (no parser)"
+    assert _ablation_label(run("detail")) == "detail (run x)"
+    assert _ablation_label(run("coarse")) == "coarse (body base, Laplacian target)"  # METHOD.md's form
+    assert _ablation_label(run("coarse", coarse_base="skinned", coarse_target="taubin", decompose=False)) == \
+        "coarse (no decomposition, skinned base, Taubin target)"

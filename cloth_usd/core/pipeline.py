@@ -12,7 +12,8 @@ these functions, so a model is trained on exactly the features it is later run o
   the two generators (:mod:`cloth_usd.core.features`);
 - :func:`run_tiers`: coarse model -> ``M_coarse`` -> detail model -> ``M_detail`` ->
   post-process, with the models passed in as callables (an onnxruntime session or a
-  torch module).
+  torch module). The coarse model's displacement is added to a :class:`CoarseBase`: the
+  associated body vertices (METHOD.md) or the skinned garment.
 
 Shape letters: T frames, N garment vertices, V body vertices, M triangles, J joints,
 F factors.
@@ -20,6 +21,7 @@ F factors.
 
 from __future__ import annotations
 
+import enum
 from dataclasses import dataclass
 from typing import Callable
 
@@ -30,15 +32,25 @@ from .features import attributes, coarse_features, detail_features, vertex_norma
 from .fit import FitModel, pair_distances
 from .graph import MeshGraph, build_graph
 from .postprocess import DEFAULT_MARGIN, push_out
-from .skinning import SkinBinding, bind_garment
+from .skinning import SkinBinding, bind_garment, skin_garment
 
 __all__ = ["GarmentPair", "BodyPatch", "body_patch", "PosedBody", "prepare_pair", "pose_body", "coarse_model_features",
-           "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn"]
+           "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn", "CoarseBase", "coarse_base_points"]
 
 #: A coarse model: ``(features (B, N, 7), graph) -> delta (B, N, 3) [m]``.
 CoarseFn = Callable[[np.ndarray, MeshGraph], np.ndarray]
 #: A detail model: ``(features (B, N, 30), attributes (B, 85), graph) -> delta (B, N, 3) [m]``.
 DetailFn = Callable[[np.ndarray, np.ndarray, MeshGraph], np.ndarray]
+
+
+class CoarseBase(str, enum.Enum):
+    """What the coarse model's displacement is added to: ``M_coarse = base + Delta_coarse``."""
+
+    BODY = "body"
+    """``I M_b``, each garment vertex's associated posed body vertex (METHOD.md)."""
+    SKINNED = "skinned"
+    """The skinning tier's garment: the rest garment carried by the body's LBS, so the model
+    learns only how the garment departs from skinning (a zero displacement is the skinning tier)."""
 
 
 @dataclass(frozen=True)
@@ -170,13 +182,29 @@ def detail_model_inputs(pair: GarmentPair, coarse_points: np.ndarray, posed: Pos
     return feats, attributes(pair.alpha, pair.betas, poses)
 
 
+def coarse_base_points(body: BodyModel, pair: GarmentPair, posed: PosedBody, poses: np.ndarray, transl: np.ndarray,
+                       base: CoarseBase | str = CoarseBase.BODY) -> np.ndarray:
+    """(T, N, 3) float64 the points the coarse displacement is added to [m], world frame.
+
+    Args:
+        posed: the posed body of these frames (:func:`pose_body`).
+        poses: (T, 72) axis-angle [rad]; transl: (T, 3) [m].
+        base: :class:`CoarseBase`.
+    """
+    if CoarseBase(base) is CoarseBase.BODY:
+        return posed.garment_points
+    return skin_garment(pair.binding, poses, transl, body.parents)
+
+
 def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray,
               coarse: CoarseFn, detail: DetailFn | None = None, *, batch_size: int = 16,
-              margin: float = DEFAULT_MARGIN) -> tuple[np.ndarray, np.ndarray]:
+              margin: float = DEFAULT_MARGIN, coarse_base: CoarseBase | str = CoarseBase.BODY
+              ) -> tuple[np.ndarray, np.ndarray]:
     """Animate a garment with a coarse model and, if given, a detail model.
 
-    ``M_coarse = I M_b + coarse(...)``, ``M_detail = M_coarse + detail(...)``, then the
-    post-process (:func:`~cloth_usd.core.postprocess.push_out`).
+    ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
+    ``coarse_base``, as the coarse model was trained), ``M_detail = M_coarse + detail(...)``,
+    then the post-process (:func:`~cloth_usd.core.postprocess.push_out`).
 
     Args:
         poses: (T, 72) axis-angle [rad]; transl: (T, 3) root translation [m].
@@ -193,7 +221,8 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
     for lo in range(0, num_t, batch_size):
         hi = min(lo + batch_size, num_t)
         posed = pose_body(body, pair, poses[lo:hi], transl[lo:hi])
-        m = posed.garment_points + coarse(coarse_model_features(pair, posed, transl[lo:hi]), pair.graph)
+        base = coarse_base_points(body, pair, posed, poses[lo:hi], transl[lo:hi], coarse_base)
+        m = base + coarse(coarse_model_features(pair, posed, transl[lo:hi]), pair.graph)
         if detail is not None:
             feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])
             m = m + detail(feats, attrs, pair.graph)

@@ -151,12 +151,16 @@ def _uniform_laplacian(faces: np.ndarray, n: int) -> sparse.csr_matrix:
 
 
 def laplacian_smooth(positions: np.ndarray, faces: np.ndarray, *, iterations: int = 10,
-                     lam: float = 0.5) -> np.ndarray:
+                     lam: float = 0.5, mu: float = 0.0) -> np.ndarray:
     """Uniform Laplacian smoothing, ``x <- x + lam (mean(neighbours) - x)``, per frame.
+
+    With ``mu < 0`` every pass is followed by a second one of step ``mu`` (Taubin's
+    lambda|mu smoothing): it removes the same fine detail without shrinking the mesh.
 
     Args:
         positions: (T, N, 3) or (N, 3) vertices [m].
         faces: (M, 3) int triangles.
+        mu: the step of the inflating pass (0: none, plain Laplacian smoothing).
     Returns:
         The smoothed vertices, same shape, float32 when the input is float32.
     """
@@ -168,6 +172,8 @@ def laplacian_smooth(positions: np.ndarray, faces: np.ndarray, *, iterations: in
     flat = x.transpose(1, 0, 2).reshape(n, num_t * 3)  # all frames in one sparse product
     for _ in range(iterations):
         flat = flat + lam * (avg @ flat - flat)
+        if mu:
+            flat = flat + mu * (avg @ flat - flat)
     out = flat.reshape(n, num_t, 3).transpose(1, 0, 2).astype(pos.dtype if pos.dtype == np.float32 else np.float64)
     return out[0] if single else out
 

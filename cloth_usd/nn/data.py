@@ -3,7 +3,9 @@
 Every model input is built through :mod:`cloth_usd.core.pipeline`, the functions the
 runtime uses at inference, so training and inference features are the same numbers.
 Targets follow METHOD.md: the coarse model learns ``Delta_coarse = M_coarse^GT - I M_b``
-(``M_coarse^GT`` the shard's Laplacian-smoothed simulation), the detail model learns
+(``M_coarse^GT`` the shard's Laplacian-smoothed simulation); configurable are the target
+(a Taubin-smoothed simulation: :class:`CoarseTarget`) and the base (the skinned garment
+instead of ``I M_b``: :class:`cloth_usd.core.pipeline.CoarseBase`). The detail model learns
 ``Delta_detail = M_sim - M_coarse`` on a given coarse garment (see
 :class:`cloth_usd.nn.train.TrainConfig.coarse_input`).
 
@@ -13,6 +15,7 @@ F features.
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 import hashlib
 import logging
@@ -27,8 +30,10 @@ from ..core.features import ATTRIBUTE_FEATURES
 from ..core.files import file_sha256
 from ..core.fit import FitModel
 from ..core.pipeline import (
+    CoarseBase,
     GarmentPair,
     PosedBody,
+    coarse_base_points,
     coarse_model_features,
     detail_model_inputs,
     pose_body,
@@ -36,8 +41,8 @@ from ..core.pipeline import (
 )
 from ..errors import ArgumentError
 
-__all__ = ["Split", "TEST_SPLITS", "Clip", "DataSet", "load_dataset", "plan_batches", "CoarseExample",
-           "DetailExample", "coarse_example", "detail_example", "Moments", "Statistics", "even_frames"]
+__all__ = ["Split", "TEST_SPLITS", "Clip", "DataSet", "load_dataset", "CoarseTarget", "with_coarse_target",
+           "plan_batches", "CoarseExample", "DetailExample", "coarse_example", "detail_example", "Moments", "Statistics", "even_frames"]
 
 log = logging.getLogger(__name__)
 
@@ -175,6 +180,34 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
                    clips=tuple(clips))
 
 
+class CoarseTarget(str, enum.Enum):
+    """The coarse model's ground truth ``M_coarse^GT``."""
+
+    STORED = "stored"
+    """The shards' coarse target: Laplacian smoothing as the factory's DatasetConfig made it
+    (METHOD.md's). Plain Laplacian smoothing shrinks the garment: on the large data set's
+    test-garment and validation sequences the 10-pass target is 11.8 mm from the simulation."""
+    TAUBIN = "taubin"
+    """Taubin lambda|mu smoothing of the simulation, re-derived when loading: it removes the
+    wrinkles but keeps the garment's size (3.2 mm from the simulation on the same sequences)."""
+
+
+#: The passes and steps of the :attr:`CoarseTarget.TAUBIN` target.
+TAUBIN_PASSES, TAUBIN_LAMBDA, TAUBIN_MU = 10, 0.5, -0.53
+
+
+def with_coarse_target(data: DataSet, target: CoarseTarget | str) -> DataSet:
+    """``data`` with every clip's :attr:`Clip.coarse` made the ``target`` way (itself for STORED)."""
+    from ..datagen.dataset import laplacian_smooth
+
+    if CoarseTarget(target) is CoarseTarget.STORED:
+        return data
+    clips = tuple(dataclasses.replace(c, coarse=laplacian_smooth(c.positions, c.pair.faces, iterations=TAUBIN_PASSES,
+                                                                 lam=TAUBIN_LAMBDA, mu=TAUBIN_MU))
+                  for c in data.clips)
+    return dataclasses.replace(data, clips=clips)
+
+
 def even_frames(num_frames: int, count: int | None) -> np.ndarray:
     """(K,) int64 ``count`` frames spread evenly over ``[0, num_frames)`` (all when None or 0)."""
     if not count or count >= num_frames:
@@ -214,7 +247,8 @@ class CoarseExample:
     features: np.ndarray
     """(B, N, 7) float64 node features."""
     base: np.ndarray
-    """(B, N, 3) float64 ``I M_b``: the associated posed body vertices [m]."""
+    """(B, N, 3) float64 the points the displacement is added to [m]: ``I M_b`` (the
+    associated posed body vertices) or the skinned garment."""
     target: np.ndarray
     """(B, N, 3) float64 ``Delta_coarse^GT`` [m]."""
     posed: PosedBody
@@ -234,13 +268,16 @@ class DetailExample:
     """(B, N, 3) float64 ``Delta_detail^GT = M_sim - M_coarse`` [m]."""
 
 
-def coarse_example(body: BodyModel, clip: Clip, frames: np.ndarray) -> CoarseExample:
-    """Coarse inputs and target of ``frames`` of ``clip`` (the runtime's feature path)."""
+def coarse_example(body: BodyModel, clip: Clip, frames: np.ndarray,
+                   base: CoarseBase | str = CoarseBase.BODY) -> CoarseExample:
+    """Coarse inputs and target of ``frames`` of ``clip`` (the runtime's feature path),
+    the displacement measured from ``base`` (:class:`~cloth_usd.core.pipeline.CoarseBase`)."""
     poses, transl = clip.poses[frames], clip.transl[frames]
     posed = pose_body(body, clip.pair, poses, transl)
     feats = coarse_model_features(clip.pair, posed, transl)
-    return CoarseExample(features=feats, base=posed.garment_points,
-                         target=clip.coarse[frames].astype(np.float64) - posed.garment_points, posed=posed)
+    points = coarse_base_points(body, clip.pair, posed, poses, transl, base)
+    return CoarseExample(features=feats, base=points, target=clip.coarse[frames].astype(np.float64) - points,
+                         posed=posed)
 
 
 def detail_example(clip: Clip, frames: np.ndarray, posed: PosedBody, coarse_points: np.ndarray) -> DetailExample:

@@ -84,7 +84,7 @@ def export_detail(model: DetailGenerator, path: str | Path) -> Path:
 
 
 def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | None, clips, body,
-            frames: int) -> dict:
+            frames: int, coarse_base: str = "body") -> dict:
     """Largest point difference [m] between the torch models and their ONNX files, through
     the runtime's pipeline (:func:`cloth_usd.core.pipeline.run_tiers`), on ``clips``."""
     from ..core.pipeline import run_tiers
@@ -113,9 +113,10 @@ def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | N
         for tier in worst:
             if tier == "detail" and t_detail is None:
                 continue
-            want, _ = run_tiers(body, clip.pair, poses, transl, t_coarse, t_detail if tier == "detail" else None)
+            want, _ = run_tiers(body, clip.pair, poses, transl, t_coarse, t_detail if tier == "detail" else None,
+                                coarse_base=coarse_base)
             got, _ = run_tiers(body, clip.pair, poses, transl, onnx_coarse,
-                               onnx_detail if tier == "detail" else None)
+                               onnx_detail if tier == "detail" else None, coarse_base=coarse_base)
             worst[tier] = max(worst[tier], float(np.abs(got - want).max()))
     return {"coarse_max_m": worst["coarse"], "detail_max_m": worst["detail"] if t_detail is not None else None,
             "sequences": len(clips), "frames": used}
@@ -199,7 +200,7 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         coarse_path = export_coarse(coarse.model, tmp / "coarse.onnx")
         detail_path = export_detail(detail.model, tmp / "detail.onnx") if detail is not None else None
         parity = _parity(coarse.model, detail.model if detail else None, coarse_path, detail_path, clips,
-                         data.body, parity_frames)
+                         data.body, parity_frames, coarse.config.coarse_base)
         worst = max(v for v in (parity["coarse_max_m"], parity["detail_max_m"]) if v is not None)
         if not worst <= tolerance:
             raise ClothUsdError(f"export parity failed: ONNX and torch differ by {worst * 1000:.4f} mm on the "
@@ -216,7 +217,8 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
                     "description": description or f"{n_train} training sequences of {data_dir.name}"}
         out = write_bundle(out_dir, name=name, category=category, coarse_onnx=coarse_path,
                            detail_onnx=detail_path, fit_npz=data_dir / FIT, configs=configs,
-                           training_data=training, metrics=summary, opset=OPSET, force=force)
+                           training_data=training, metrics=summary, opset=OPSET, force=force,
+                           coarse_base=coarse.config.coarse_base)
     load_bundle(out)
     return out
 

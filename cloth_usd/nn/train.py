@@ -48,10 +48,12 @@ import torch
 from ..core.body import BodyModel
 from ..core.files import file_sha256, read_config
 from ..core.graph import MeshGraph
+from ..core.pipeline import CoarseBase
 from ..errors import ArgumentError, ClothUsdError
 from ..runtime.io import COARSE_INPUTS, DETAIL_INPUTS, coarse_inputs, detail_inputs
 from .data import (
     Clip,
+    CoarseTarget,
     DataSet,
     Moments,
     Split,
@@ -60,6 +62,7 @@ from .data import (
     detail_example,
     load_dataset,
     plan_batches,
+    with_coarse_target,
 )
 from .models import CoarseConfig, CoarseGenerator, DetailConfig, DetailGenerator
 
@@ -129,9 +132,20 @@ class TrainConfig:
     """Detail only: train on the coarse model's prediction or on the coarse target."""
     prefetch: int = 2
     """Batches whose features are computed ahead in a worker thread (0: none)."""
+    coarse_base: CoarseBase = CoarseBase.BODY
+    """Coarse only: the displacement is added to ``I M_b`` (METHOD.md) or to the ``skinned``
+    garment (a detail run takes its coarse run's)."""
+    coarse_target: CoarseTarget = CoarseTarget.STORED
+    """The coarse ground truth: the shards' Laplacian smoothing (METHOD.md) or ``taubin``
+    (re-derived without shrinkage); the coarse model's target, and the detail model's
+    ``M_coarse`` when ``coarse_input`` is ``target``."""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "coarse_input", CoarseInput(self.coarse_input))
+        for key, kind in (("coarse_input", CoarseInput), ("coarse_target", CoarseTarget), ("coarse_base", CoarseBase)):
+            value = getattr(self, key)
+            if value not in {k.value for k in kind} | set(kind):
+                raise ArgumentError(f"TrainConfig: {key}={value!r} is not one of {', '.join(k.value for k in kind)}")
+            object.__setattr__(self, key, kind(value))
         checks = {"epochs": self.epochs >= 1, "lr": self.lr > 0, "lr_decay": 0 < self.lr_decay <= 1,
                   "batch": self.batch >= 1, "width": self.width > 0, "grad_clip": self.grad_clip >= 0,
                   "stat_frames": self.stat_frames >= 1, "val_frames": self.val_frames >= 0,
@@ -142,9 +156,7 @@ class TrainConfig:
             raise ArgumentError(f"TrainConfig: out of range: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
 
     def to_json(self) -> dict:
-        out = dataclasses.asdict(self)
-        out["coarse_input"] = self.coarse_input.value
-        return out
+        return {k: v.value if isinstance(v, enum.Enum) else v for k, v in dataclasses.asdict(self).items()}
 
     @classmethod
     def from_mapping(cls, raw: Mapping[str, Any], source: str = "config") -> "TrainConfig":
@@ -419,14 +431,17 @@ class _Examples:
     """Builds a batch's inputs and target (numpy), the feature work ahead in a worker thread."""
 
     def __init__(self, tier: Tier, body: BodyModel, clips: Sequence[Clip], config: TrainConfig,
-                 coarse_model: CoarseGenerator | None, device: torch.device) -> None:
+                 coarse_model: CoarseGenerator | None, device: torch.device,
+                 coarse_base: CoarseBase | None = None) -> None:
         self.tier, self.body, self.clips, self.config = tier, body, clips, config
         self.coarse_model = coarse_model
+        self.coarse_base = CoarseBase(coarse_base) if coarse_base is not None else config.coarse_base
+        """The coarse model's base: the config's (coarse), the coarse run's (detail)."""
         self.tensors = _Tensors(device)
 
     def _first(self, item: tuple[int, np.ndarray]):
         clip = self.clips[item[0]]
-        return clip, item[1], coarse_example(self.body, clip, item[1])
+        return clip, item[1], coarse_example(self.body, clip, item[1], self.coarse_base)
 
     def iterate(self, batches: Sequence[tuple[int, np.ndarray]]) -> Iterable[tuple]:
         """``(clip, features, attributes | None, base, target)`` per batch, in order."""
@@ -558,6 +573,7 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
         raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run, not a coarse one")
     data = dataset if dataset is not None else load_dataset(
         data_dir, (Split.TRAIN, Split.VAL), body=body, max_frames=config.max_frames or None)
+    data = with_coarse_target(data, config.coarse_target)
     train_clips, val_clips = data.split(Split.TRAIN), data.split(Split.VAL)
     if not train_clips:
         raise ArgumentError(f"--data {data_dir}: no accepted training sequences")
@@ -569,8 +585,9 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
                      "train_sequences": len(train_clips), "val_sequences": len(val_clips)},
             "coarse_run": _coarse_run_record(coarse) if coarse is not None else None,
             "body_model_sha256": data.body.sha256, "torch": torch.__version__}
-    examples = _Examples(tier, data.body, train_clips, config, coarse.model if coarse else None, dev)
-    val_examples = _Examples(tier, data.body, val_clips, config, coarse.model if coarse else None, dev)
+    base = coarse.config.coarse_base if coarse is not None else config.coarse_base
+    examples = _Examples(tier, data.body, train_clips, config, coarse.model if coarse else None, dev, base)
+    val_examples = _Examples(tier, data.body, val_clips, config, coarse.model if coarse else None, dev, base)
 
     torch.manual_seed(config.seed)
     model = build_model(tier, config).to(dev)
@@ -579,7 +596,8 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
     best_loss, best_epoch, start = math.inf, -1, 0
     if resume:
         old = _read_run_json(run_dir)
-        same = {k: v for k, v in old["config"].items() if k != "epochs"} == \
+        old_config = TrainConfig.from_mapping(old["config"], str(run_dir / RUN)).to_json()  # older runs lack newer keys
+        same = {k: v for k, v in old_config.items() if k != "epochs"} == \
             {k: v for k, v in info["config"].items() if k != "epochs"}
         if not same or old["tier"] != tier.value:
             raise ArgumentError(f"--resume: {run_dir / RUN} was made with another tier or config "

@@ -3,7 +3,8 @@
 A bundle is a folder::
 
     <bundle>/manifest.json   format_version, name, category, tiers, opset, files {name: sha256},
-                             models {tier: {file, inputs, outputs, config}}, fit {file, ...},
+                             models {tier: {file, inputs, outputs, config}; coarse also
+                             base: body | skinned}, fit {file, ...},
                              training_data {manifest_sha256, description}, metrics {...}
     <bundle>/coarse.onnx     the coarse generator (inputs: runtime.io.COARSE_INPUTS)
     <bundle>/detail.onnx     the detail generator with its parser (optional)
@@ -27,6 +28,7 @@ from typing import Any, Iterable, Mapping
 
 from ..core.files import file_sha256, models_dir
 from ..core.fit import FitModel
+from ..core.pipeline import CoarseBase
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError, BundleError
 from .io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT
@@ -67,6 +69,9 @@ class ModelBundle:
     """The parsed manifest."""
     fit: FitModel
     """The fit attribute's factor-analysis model."""
+    coarse_base: CoarseBase = CoarseBase.BODY
+    """What the coarse model's displacement is added to (manifest ``models.coarse.base``;
+    bundles without the field: ``body``, METHOD.md's)."""
     _sessions: dict = field(default_factory=dict, repr=False)
 
     def model_path(self, tier: Tier) -> Path:
@@ -135,6 +140,10 @@ def load_bundle(path: str | Path) -> ModelBundle:
             raise BundleError(f"{mpath}: models.{tier.value} inputs/outputs {entry.get('inputs')} -> "
                               f"{entry.get('outputs')} do not match this runtime's "
                               f"{list(_INPUTS[tier])} -> ['{OUTPUT}']")
+    base = models[Tier.COARSE.value].get("base", CoarseBase.BODY.value)
+    if base not in {b.value for b in CoarseBase}:
+        raise BundleError(f"{mpath}: models.coarse.base {base!r} is not one of "
+                          f"{', '.join(b.value for b in CoarseBase)}")
     fit_file = _field(manifest, "fit", dict, mpath).get("file")
     if fit_file not in files:
         raise BundleError(f"{mpath}: fit.file must name a file listed in 'files'")
@@ -154,7 +163,8 @@ def load_bundle(path: str | Path) -> ModelBundle:
     except (OSError, ValueError, KeyError) as exc:
         raise BundleError(f"{folder}: bundle file {fit_file} is not a fit model ({exc})") from exc
     return ModelBundle(path=folder, name=name, category=category, tiers=tiers,
-                       sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit)
+                       sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit,
+                       coarse_base=CoarseBase(base))
 
 
 def _candidates(folder: Path) -> list[Path]:
@@ -201,7 +211,7 @@ def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | No
 def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, coarse_onnx: str | Path,
                  detail_onnx: str | Path | None, fit_npz: str | Path, configs: Mapping[str, Any],
                  training_data: Mapping[str, Any], metrics: Mapping[str, Any], opset: int,
-                 force: bool = False) -> Path:
+                 force: bool = False, coarse_base: CoarseBase | str = CoarseBase.BODY) -> Path:
     """Copy exported models and the fit model into a new bundle folder and write its manifest.
 
     Args:
@@ -214,6 +224,7 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         training_data: ``{"manifest_sha256": ..., "description": ...}``.
         metrics: validation metrics (JSON-able), e.g. mean vertex error [mm].
         opset: the ONNX opset of the exported files.
+        coarse_base: what the coarse model's displacement is added to, as it was trained.
     Returns:
         The bundle folder.
     """
@@ -243,6 +254,8 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         files[_FILES[tier]] = file_sha256(out / _FILES[tier])
         models[tier.value] = {"file": _FILES[tier], "inputs": list(_INPUTS[tier]), "outputs": [OUTPUT],
                               "config": dict(configs.get(tier.value, {}))}
+        if tier is Tier.COARSE:
+            models[tier.value]["base"] = CoarseBase(coarse_base).value
         tiers.append(tier.value)
     shutil.copyfile(fit_npz, out / _FIT)
     files[_FIT] = file_sha256(out / _FIT)

@@ -113,5 +113,5 @@ class LearnedGarment:
 
         points, moved = run_tiers(self.body, self.pair, poses, transl, run_coarse,
                                   run_detail if detail is not None else None, batch_size=batch_size,
-                                  margin=self.margin)
+                                  margin=self.margin, coarse_base=self.bundle.coarse_base)
         return LearnedFrames(points=points, moved=moved)

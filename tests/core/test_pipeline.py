@@ -50,3 +50,29 @@ def test_posed_patch_matches_the_whole_posed_body():
     feats = coarse_model_features(pair, posed, transl)
     np.testing.assert_allclose(feats[..., :3], normals[:, idx], atol=1e-12)
     np.testing.assert_allclose(feats[..., 3:6], verts[:, idx] - transl[:, None], atol=1e-12)
+
+
+def test_coarse_base_adds_the_displacement_to_the_body_or_the_skinned_garment():
+    """A zero displacement gives I M_b (METHOD.md's base) or exactly the skinning tier."""
+    from cloth_usd.core.pipeline import CoarseBase, run_tiers
+    from cloth_usd.core.postprocess import push_out
+    from cloth_usd.core.skinning import skin_garment
+
+    body = load_body_model()
+    betas = np.zeros(10)
+    rest, faces = make_tshirt(body, betas, TShirtParams(target_vertices=600))
+    pair = prepare_pair(body, betas, rest, faces, find_bundle("tshirt").fit)
+    poses, transl = walk_cycle(5)
+
+    def zero(feats, graph):
+        return np.zeros(feats.shape[:2] + (3,))
+
+    posed = pose_body(body, pair, poses, transl)
+    for base, want in ((CoarseBase.BODY, posed.garment_points),
+                       ("skinned", skin_garment(pair.binding, poses, transl, body.parents))):
+        got, moved = run_tiers(body, pair, poses, transl, zero, batch_size=2, coarse_base=base)
+        expect, expect_moved = push_out(want, posed.garment_points, posed.garment_normals)
+        np.testing.assert_allclose(got, expect, atol=1e-12)
+        np.testing.assert_array_equal(moved, expect_moved)
+    with pytest.raises(ValueError):
+        run_tiers(body, pair, poses, transl, zero, coarse_base="hips")

@@ -43,6 +43,24 @@ def test_laplacian_coarse_target_is_smoother_and_same_shape():
     np.testing.assert_allclose(laplacian_smooth(pos[1], f, iterations=5), out[1], atol=1e-6)  # per frame
 
 
+def test_taubin_coarse_target_keeps_the_size_laplacian_shrinks():
+    """mu < 0: the same smoothing without the shrinkage (a sphere keeps its radius)."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=3, radius=0.2)
+    rng = np.random.default_rng(0)
+    pos = (sphere.vertices + rng.normal(0, 0.002, sphere.vertices.shape))[None]
+    f = np.asarray(sphere.faces)
+    radius = lambda x: np.linalg.norm(x[0], axis=1).mean()  # noqa: E731
+    plain = laplacian_smooth(pos, f, iterations=10)
+    taubin = laplacian_smooth(pos, f, iterations=10, mu=-0.53)
+    assert radius(plain) < 0.99 * radius(pos)
+    assert abs(radius(taubin) - radius(pos)) < 0.1 * abs(radius(plain) - radius(pos))
+    noise = lambda x: np.linalg.norm(x[0] - sphere.vertices, axis=1).mean()  # noqa: E731
+    assert noise(taubin) < 0.7 * noise(pos) < noise(plain)  # the bumps smoothed, the sphere kept
+    np.testing.assert_array_equal(laplacian_smooth(pos, f, iterations=10, mu=0.0), plain)
+
+
 class FakeSim:
     """Stands in for the simulator: the rest garment, dropping 1 mm a frame; counts calls."""
 

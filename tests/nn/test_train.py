@@ -14,13 +14,17 @@ from train_data import TINY_TRAIN, tiny_dataset, tiny_runs, tiny_trained_bundle 
 
 from cloth_usd.core.pipeline import run_tiers  # noqa: E402
 from cloth_usd.errors import ArgumentError  # noqa: E402
+from cloth_usd.datagen.dataset import laplacian_smooth  # noqa: E402
 from cloth_usd.nn.data import (  # noqa: E402
+    TAUBIN_MU,
+    CoarseTarget,
     Split,
     Statistics,
     coarse_example,
     detail_example,
     load_dataset,
     plan_batches,
+    with_coarse_target,
 )
 from cloth_usd.nn.train import (  # noqa: E402
     TrainConfig,
@@ -144,6 +148,70 @@ def test_resume_continues_bit_identically(data, tmp_path):
     sa = torch.load(tmp_path / "a" / "checkpoint.pt", weights_only=True)["optimizer"]["state"]
     sb = torch.load(tmp_path / "b" / "checkpoint.pt", weights_only=True)["optimizer"]["state"]
     assert all(torch.equal(sa[k]["exp_avg_sq"], sb[k]["exp_avg_sq"]) for k in sa)
+
+
+def test_taubin_coarse_target_is_trained_on_and_recorded(data, tmp_path):
+    path, ds = data
+    assert with_coarse_target(ds, "stored") is ds
+    taubin = with_coarse_target(ds, CoarseTarget.TAUBIN)
+    clip, old = taubin.clips[0], ds.clips[0]
+    np.testing.assert_array_equal(clip.positions, old.positions)
+    np.testing.assert_allclose(clip.coarse, laplacian_smooth(old.positions, old.pair.faces, mu=TAUBIN_MU))
+    assert not np.allclose(clip.coarse, old.coarse, atol=1e-4)
+    config = TrainConfig(**{**QUICK.to_json(), "epochs": 1, "coarse_target": "taubin"})
+    run = train("coarse", path, tmp_path / "t", config, device="cpu", dataset=ds)
+    assert json.loads((tmp_path / "t" / "run.json").read_text())["config"]["coarse_target"] == "taubin"
+    ex = _Examples(Tier.COARSE, ds.body, taubin.split(Split.TRAIN), config, None, torch.device("cpu"))
+    _, _, _, base, target = next(ex.iterate(plan_batches(taubin.split(Split.TRAIN), 2)))
+    np.testing.assert_allclose(base + target, taubin.split(Split.TRAIN)[0].coarse[:2], atol=1e-6)
+    assert run.history
+    with pytest.raises(ArgumentError, match="coarse_target"):
+        TrainConfig.from_mapping({"coarse_target": "gaussian"})
+
+
+def test_skinned_coarse_base_from_training_to_the_runtime(data, tmp_path):
+    """coarse_base = skinned: the coarse target is measured from the skinned garment, the
+    detail run adds its coarse run's prediction to the same base, the bundle records it
+    and the runtime (onnxruntime) gives what the torch models give through run_tiers."""
+    from cloth_usd.core.skinning import skin_garment
+    from cloth_usd.nn.export import export_bundle
+    from cloth_usd.runtime import LearnedGarment, load_bundle
+
+    path, ds = data
+    coarse_cfg = TrainConfig(**{**QUICK.to_json(), "epochs": 1, "coarse_base": "skinned"})
+    train("coarse", path, tmp_path / "c", coarse_cfg, device="cpu", dataset=ds)
+    train("detail", path, tmp_path / "d", TrainConfig(**{**QUICK.to_json(), "epochs": 1}), device="cpu",
+          dataset=ds, coarse_run=tmp_path / "c")
+    coarse = load_run(tmp_path / "c")
+    clip, frames = ds.split(Split.TRAIN)[0], np.arange(2)
+    skinned = skin_garment(clip.pair.binding, clip.poses[:2], clip.transl[:2], ds.body.parents)
+    ex = coarse_example(ds.body, clip, frames, "skinned")
+    np.testing.assert_allclose(ex.base, skinned, atol=1e-12)
+    np.testing.assert_allclose(ex.base + ex.target, clip.coarse[:2], atol=1e-6)
+    detail_examples = _Examples(Tier.DETAIL, ds.body, [clip], load_run(tmp_path / "d").config, coarse.model,
+                                torch.device("cpu"), coarse.config.coarse_base)
+    _, _, _, m_coarse, _ = next(detail_examples.iterate([(0, frames)]))
+    np.testing.assert_allclose(m_coarse, skinned + torch_coarse_fn(coarse.model)(ex.features, clip.pair.graph),
+                               atol=1e-9)
+    bundle = load_bundle(export_bundle(tmp_path / "c", tmp_path / "d", path, tmp_path / "b", name="skinned-base"))
+    assert bundle.coarse_base.value == "skinned"
+    val = load_dataset(path, (Split.VAL,), max_frames=3).split(Split.VAL)[0]
+    learned = LearnedGarment(bundle, ds.body, val.pair.betas, val.rest_points, val.pair.faces)
+    want, _ = run_tiers(ds.body, val.pair, val.poses, val.transl, torch_coarse_fn(coarse.model),
+                        torch_detail_fn(load_run(tmp_path / "d").model), coarse_base="skinned")
+    np.testing.assert_allclose(learned.evaluate("detail", val.poses, val.transl).points, want, atol=1e-4, rtol=0)
+
+
+def test_runs_from_before_coarse_target_resume(data, tmp_path):
+    """A run.json written before the coarse_target key existed still resumes."""
+    path, ds = data
+    one = TrainConfig(**{**QUICK.to_json(), "epochs": 1})
+    train("coarse", path, tmp_path / "r", one, device="cpu", dataset=ds)
+    info = json.loads((tmp_path / "r" / "run.json").read_text())
+    del info["config"]["coarse_target"]
+    (tmp_path / "r" / "run.json").write_text(json.dumps(info))
+    assert len(train("coarse", path, tmp_path / "r", QUICK, device="cpu", dataset=ds, resume=True).history) == \
+        QUICK.epochs
 
 
 def test_exported_bundle_runs_like_the_torch_models(tmp_path_factory):

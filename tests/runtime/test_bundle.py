@@ -8,6 +8,7 @@ import shutil
 import numpy as np
 import pytest
 
+from cloth_usd.core.pipeline import CoarseBase
 from cloth_usd.core.scene import Category, Tier
 from cloth_usd.errors import ArgumentError, BundleError, ClothUsdError
 from cloth_usd.runtime import find_bundle, load_bundle
@@ -38,10 +39,25 @@ def test_round_trip(tmp_path, fake_exported):
     assert m["models"]["coarse"]["inputs"] == ["features", "nbr", "nbr_mask"]
     assert m["models"]["coarse"]["config"] == {"width": 0.125}
     assert m["training_data"]["description"] and m["metrics"] == {"note": "untrained"}
+    assert m["models"]["coarse"]["base"] == "body" and b.coarse_base is CoarseBase.BODY
+    del m["models"]["coarse"]["base"]  # a bundle from before the field: METHOD.md's base
+    (folder / "manifest.json").write_text(json.dumps(m))
+    assert load_bundle(folder).coarse_base is CoarseBase.BODY
     coarse_only = load_bundle(write_tiny_bundle(tmp_path / "c", fake_exported, detail=False))
     assert coarse_only.tiers == (Tier.COARSE,)
     with pytest.raises(BundleError, match="no 'detail' model"):
         coarse_only.session("detail")
+
+
+def test_skinned_coarse_base_is_recorded(tmp_path, fake_exported):
+    from cloth_usd.runtime.bundle import write_bundle
+
+    coarse, det, fit, configs = fake_exported
+    folder = write_bundle(tmp_path / "s", name="s", category="tshirt", coarse_onnx=coarse, detail_onnx=det,
+                          fit_npz=fit, configs=configs, training_data={}, metrics={}, opset=18,
+                          coarse_base="skinned")
+    assert load_bundle(folder).coarse_base is CoarseBase.SKINNED
+    assert "base" not in json.loads((folder / "manifest.json").read_text())["models"]["detail"]
 
 
 def test_find_bundle_by_category(tmp_path, fake_exported):
@@ -79,6 +95,7 @@ def test_missing_file(tmp_path, fake_exported):
     (lambda m: m.update(tiers=["detail", "ultra"]), "unknown tier"),
     (lambda m: m["models"]["coarse"].update(inputs=["x"]), "do not match this runtime"),
     (lambda m: m["files"].update({"../evil": "0"}), "plain relative name"),
+    (lambda m: m["models"]["coarse"].update(base="hips"), "models.coarse.base 'hips' is not one of body, skinned"),
 ])
 def test_bad_manifest(tmp_path, fake_exported, edit, expect):
     folder = write_tiny_bundle(tmp_path / "b", fake_exported)
@@ -109,3 +126,8 @@ def test_the_shipped_tshirt_bundle_verifies_and_records_its_evaluation():
     assert bundle is not None and bundle.path.parent == default_bundle_dir()
     metrics = json.loads((bundle.path / "manifest.json").read_text())["metrics"]
     assert metrics  # the evaluation the README quotes travels with the models
+    evaluation = metrics["evaluation"]
+    assert evaluation["same_models"] is True  # measured on these very ONNX files
+    for row in evaluation["rows"]:  # issue #4: detail < coarse < skinning on every test set
+        mean = row["mean_mm"]
+        assert mean["detail"] < mean["coarse"] < mean["skinning"], row["title"]
