@@ -29,7 +29,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .core.body import BodyModel
-from .core.pipeline import run_tiers
+from .core.pipeline import CoarseBase, run_tiers
 from .core.skinning import skin_garment
 from .errors import ArgumentError
 
@@ -194,7 +194,7 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         log.warning("%s: the bundle was trained on another data set (manifest sha256 %s...)", data_dir,
                     str(trained_on)[:12])
     runs = []
-    bases: dict[str, str] = {}
+    bases: dict[str, CoarseBase] = {}  # coarse ablation runs: the base each was trained with
     ablations: dict[str, dict] = {}
     if ablation_runs:
         from .nn.train import BEST, load_run, pick_device, torch_coarse_fn, torch_detail_fn
