@@ -193,8 +193,8 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
     if trained_on != data.manifest_sha256:
         log.warning("%s: the bundle was trained on another data set (manifest sha256 %s...)", data_dir,
                     str(trained_on)[:12])
-    runs = []
-    bases: dict[str, CoarseBase] = {}  # coarse ablation runs: the base each was trained with
+    shipped_coarse = _session_coarse_fn(bundle_obj.session("coarse"))
+    runs: list[tuple[str, tuple, CoarseBase]] = []  # (label, models for run_tiers, their coarse base)
     ablations: dict[str, dict] = {}
     if ablation_runs:
         from .nn.train import BEST, load_run, pick_device, torch_coarse_fn, torch_detail_fn
@@ -207,7 +207,6 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
             label = _ablation_label(run)
             if label in ablations:
                 label = f"{label} [{run.path.name}]"
-            fn = torch_detail_fn(run.model, dev) if run.tier.value == "detail" else torch_coarse_fn(run.model, dev)
             used = (run.info.get("coarse_run") or {}).get("best_sha256")
             record = {"run": str(run.path), "tier": run.tier.value, "config": run.config.to_json(),
                       "best_epoch": run.epoch, "best_sha256": file_sha256(run.path / BEST)}
@@ -216,9 +215,10 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
                 if shipped and used != shipped:
                     log.warning("%s: trained on another coarse model than the bundle's", run.path)
             ablations[label] = record
-            bases[label] = run.config.coarse_base
-            runs.append((label, run.tier.value, fn))
-    shipped_coarse = _session_coarse_fn(bundle_obj.session("coarse"))
+            if run.tier.value == "detail":  # on the bundle's coarse model
+                runs.append((label, (shipped_coarse, torch_detail_fn(run.model, dev)), bundle_obj.coarse_base))
+            else:
+                runs.append((label, (torch_coarse_fn(run.model, dev),), run.config.coarse_base))
     tiers = ["skinning", "coarse"] + (["detail"] if "detail" in [t.value for t in bundle_obj.tiers] else []) \
         + [label for label, _, _ in runs]
     test_garment = [c.meta for c in clips if c.split.value == "test_garment"]
@@ -246,15 +246,9 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         for tier in ("coarse", "detail"):
             if tier in tiers:
                 outputs[tier] = learned.evaluate(tier, clip.poses, clip.transl, batch_size=batch_size).points
-        for label_, tier, fn in runs:
-            if tier == "detail":
-                outputs[label_] = run_tiers(body, learned.pair, clip.poses, clip.transl, shipped_coarse, fn,
-                                            batch_size=batch_size, margin=learned.margin,
-                                            coarse_base=bundle_obj.coarse_base)[0]
-            else:
-                outputs[label_] = run_tiers(body, learned.pair, clip.poses, clip.transl, fn,
-                                            batch_size=batch_size, margin=learned.margin,
-                                            coarse_base=bases[label_])[0]
+        for label_, models, base in runs:
+            outputs[label_] = run_tiers(body, learned.pair, clip.poses, clip.transl, *models, batch_size=batch_size,
+                                        margin=learned.margin, coarse_base=base)[0]
         for tier, pts in outputs.items():
             err = np.linalg.norm(pts - truth, axis=-1) * 1000.0
             for key, _ in keys:

@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from ..core.graph import build_graph
+from ..core.pipeline import CoarseBase
 from ..runtime.io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT, detail_inputs
 from .models import ATTRIBUTE_FEATURES, CoarseGenerator, DetailGenerator
 
@@ -84,7 +85,7 @@ def export_detail(model: DetailGenerator, path: str | Path) -> Path:
 
 
 def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | None, clips, body,
-            frames: int, coarse_base: str = "body") -> dict:
+            frames: int, coarse_base: CoarseBase | str = CoarseBase.BODY) -> dict:
     """Largest point difference [m] between the torch models and their ONNX files, through
     the runtime's pipeline (:func:`cloth_usd.core.pipeline.run_tiers`), on ``clips``."""
     from ..core.pipeline import run_tiers

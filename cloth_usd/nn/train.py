@@ -143,7 +143,7 @@ class TrainConfig:
     def __post_init__(self) -> None:
         for key, kind in (("coarse_input", CoarseInput), ("coarse_target", CoarseTarget), ("coarse_base", CoarseBase)):
             value = getattr(self, key)
-            if value not in {k.value for k in kind} | set(kind):
+            if value not in {k.value for k in kind}:  # str enums: a member equals its value
                 raise ArgumentError(f"TrainConfig: {key}={value!r} is not one of {', '.join(k.value for k in kind)}")
             object.__setattr__(self, key, kind(value))
         checks = {"epochs": self.epochs >= 1, "lr": self.lr > 0, "lr_decay": 0 < self.lr_decay <= 1,
