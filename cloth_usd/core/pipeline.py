@@ -13,7 +13,9 @@ these functions, so a model is trained on exactly the features it is later run o
 - :func:`run_tiers`: coarse model -> ``M_coarse`` -> detail model -> ``M_detail`` ->
   post-process, with the models passed in as callables (an onnxruntime session or a
   torch module). The coarse model's displacement is added to a :class:`CoarseBase`: the
-  associated body vertices (METHOD.md) or the skinned garment.
+  associated body vertices (docs/method.md) or the skinned garment. With
+  :attr:`~cloth_usd.core.heading.Heading.CANONICAL` the models see the body turned to face
+  +Z and their garment is turned back (:mod:`cloth_usd.core.heading`).
 
 Shape letters: T frames, N garment vertices, V body vertices, M triangles, J joints,
 F factors.
@@ -31,6 +33,7 @@ from .body import BodyModel, lbs, shape_body
 from .features import attributes, coarse_features, detail_features, vertex_normals
 from .fit import FitModel, pair_distances
 from .graph import MeshGraph, build_graph
+from .heading import Heading, heading_frame
 from .postprocess import DEFAULT_MARGIN, push_out
 from .skinning import SkinBinding, bind_garment, skin_garment
 
@@ -47,7 +50,7 @@ class CoarseBase(str, enum.Enum):
     """What the coarse model's displacement is added to: ``M_coarse = base + Delta_coarse``."""
 
     BODY = "body"
-    """``I M_b``, each garment vertex's associated posed body vertex (METHOD.md)."""
+    """``I M_b``, each garment vertex's associated posed body vertex (docs/method.md)."""
     SKINNED = "skinned"
     """The skinning tier's garment: the rest garment carried by the body's LBS, so the model
     learns only how the garment departs from skinning (a zero displacement is the skinning tier)."""
@@ -62,7 +65,7 @@ class GarmentPair:
     faces: np.ndarray
     """(M, 3) int64 garment triangles."""
     binding: SkinBinding
-    """The skinning binding (its association is METHOD.md's ``I``)."""
+    """The skinning binding (its association is docs/method.md's ``I``)."""
     v_shaped: np.ndarray
     """(V, 3) float64 unposed shaped body [m]."""
     joints: np.ndarray
@@ -198,8 +201,8 @@ def coarse_base_points(body: BodyModel, pair: GarmentPair, posed: PosedBody, pos
 
 def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray,
               coarse: CoarseFn, detail: DetailFn | None = None, *, batch_size: int = 16,
-              margin: float = DEFAULT_MARGIN, coarse_base: CoarseBase | str = CoarseBase.BODY
-              ) -> tuple[np.ndarray, np.ndarray]:
+              margin: float = DEFAULT_MARGIN, coarse_base: CoarseBase | str = CoarseBase.BODY,
+              heading: Heading | str = Heading.WORLD) -> tuple[np.ndarray, np.ndarray]:
     """Animate a garment with a coarse model and, if given, a detail model.
 
     ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
@@ -211,11 +214,15 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
         coarse, detail: the models (see :data:`CoarseFn`, :data:`DetailFn`).
         batch_size: frames per model call.
         margin: the post-process clearance [m].
+        heading: :class:`~cloth_usd.core.heading.Heading`, as the models were trained.
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the garment per frame and
         how many vertices the post-process moved in each.
     """
     num_t, n = poses.shape[0], pair.num_vertices
+    frame = heading_frame(poses, transl, pair.joints[0]) if Heading(heading) is Heading.CANONICAL else None
+    if frame is not None:
+        poses = frame.canonical_poses(poses)
     points = np.empty((num_t, n, 3))
     moved = np.zeros(num_t, dtype=np.int64)
     for lo in range(0, num_t, batch_size):
@@ -227,4 +234,4 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
             feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])
             m = m + detail(feats, attrs, pair.graph)
         points[lo:hi], moved[lo:hi] = push_out(m, posed.garment_points, posed.garment_normals, margin=margin)
-    return points, moved
+    return (points if frame is None else frame.to_world(points)), moved

@@ -2,7 +2,7 @@
 
 Every model input is built through :mod:`cloth_usd.core.pipeline`, the functions the
 runtime uses at inference, so training and inference features are the same numbers.
-Targets follow METHOD.md: the coarse model learns ``Delta_coarse = M_coarse^GT - I M_b``
+Targets follow docs/method.md: the coarse model learns ``Delta_coarse = M_coarse^GT - I M_b``
 (``M_coarse^GT`` the shard's Laplacian-smoothed simulation); configurable are the target
 (a Taubin-smoothed simulation: :class:`CoarseTarget`) and the base (the skinned garment
 instead of ``I M_b``: :class:`cloth_usd.core.pipeline.CoarseBase`). The detail model learns
@@ -29,6 +29,7 @@ from ..core.body import BodyModel, load_body_model
 from ..core.features import ATTRIBUTE_FEATURES
 from ..core.files import file_sha256
 from ..core.fit import FitModel
+from ..core.heading import Heading, heading_frame
 from ..core.pipeline import (
     CoarseBase,
     GarmentPair,
@@ -41,7 +42,7 @@ from ..core.pipeline import (
 )
 from ..errors import ArgumentError
 
-__all__ = ["Split", "TEST_SPLITS", "Clip", "DataSet", "load_dataset", "CoarseTarget", "with_coarse_target",
+__all__ = ["Split", "TEST_SPLITS", "Clip", "DataSet", "load_dataset", "CoarseTarget", "with_coarse_target", "with_heading",
            "plan_batches", "CoarseExample", "DetailExample", "coarse_example", "detail_example", "Moments", "Statistics", "even_frames"]
 
 log = logging.getLogger(__name__)
@@ -185,7 +186,7 @@ class CoarseTarget(str, enum.Enum):
 
     STORED = "stored"
     """The shards' coarse target: Laplacian smoothing as the factory's DatasetConfig made it
-    (METHOD.md's). Plain Laplacian smoothing shrinks the garment: on the large data set's
+    (docs/method.md's). Plain Laplacian smoothing shrinks the garment: on the large data set's
     test-garment and validation sequences the 10-pass target is 11.8 mm from the simulation."""
     TAUBIN = "taubin"
     """Taubin lambda|mu smoothing of the simulation, re-derived when loading: it removes the
@@ -206,6 +207,22 @@ def with_coarse_target(data: DataSet, target: CoarseTarget | str) -> DataSet:
                                                                  lam=TAUBIN_LAMBDA, mu=TAUBIN_MU))
                   for c in data.clips)
     return dataclasses.replace(data, clips=clips)
+
+
+def with_heading(data: DataSet, heading: Heading | str) -> DataSet:
+    """``data`` in the frame the models see (itself for WORLD): with ``canonical``, every
+    clip's poses lose their heading and its simulated and coarse garments turn with the
+    body (:class:`~cloth_usd.core.heading.HeadingFrame`), as the runtime does."""
+    if Heading(heading) is Heading.WORLD:
+        return data
+    clips = []
+    for c in data.clips:
+        frame = heading_frame(c.poses, c.transl, c.pair.joints[0])
+        clips.append(dataclasses.replace(
+            c, poses=frame.canonical_poses(c.poses),
+            positions=frame.to_canonical(c.positions).astype(np.float32),
+            coarse=frame.to_canonical(c.coarse).astype(np.float32)))
+    return dataclasses.replace(data, clips=tuple(clips))
 
 
 def even_frames(num_frames: int, count: int | None) -> np.ndarray:

@@ -28,6 +28,7 @@ from typing import Any, Iterable, Mapping
 
 from ..core.files import file_sha256, models_dir
 from ..core.fit import FitModel
+from ..core.heading import Heading
 from ..core.pipeline import CoarseBase
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError, BundleError
@@ -71,7 +72,10 @@ class ModelBundle:
     """The fit attribute's factor-analysis model."""
     coarse_base: CoarseBase = CoarseBase.BODY
     """What the coarse model's displacement is added to (manifest ``models.coarse.base``;
-    bundles without the field: ``body``, METHOD.md's)."""
+    bundles without the field: ``body``, docs/method.md's)."""
+    heading: Heading = Heading.WORLD
+    """The frame the models see the body in (manifest ``models.coarse.heading``; bundles
+    without the field: ``world``, as tshirt-v1..v3 were trained)."""
     _sessions: dict = field(default_factory=dict, repr=False)
 
     def model_path(self, tier: Tier) -> Path:
@@ -144,6 +148,10 @@ def load_bundle(path: str | Path) -> ModelBundle:
     if base not in {b.value for b in CoarseBase}:
         raise BundleError(f"{mpath}: models.coarse.base {base!r} is not one of "
                           f"{', '.join(b.value for b in CoarseBase)}")
+    heading = models[Tier.COARSE.value].get("heading", Heading.WORLD.value)
+    if heading not in {h.value for h in Heading}:
+        raise BundleError(f"{mpath}: models.coarse.heading {heading!r} is not one of "
+                          f"{', '.join(h.value for h in Heading)}")
     fit_file = _field(manifest, "fit", dict, mpath).get("file")
     if fit_file not in files:
         raise BundleError(f"{mpath}: fit.file must name a file listed in 'files'")
@@ -164,7 +172,7 @@ def load_bundle(path: str | Path) -> ModelBundle:
         raise BundleError(f"{folder}: bundle file {fit_file} is not a fit model ({exc})") from exc
     return ModelBundle(path=folder, name=name, category=category, tiers=tiers,
                        sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit,
-                       coarse_base=CoarseBase(base))
+                       coarse_base=CoarseBase(base), heading=Heading(heading))
 
 
 def _candidates(folder: Path) -> list[Path]:
@@ -211,7 +219,8 @@ def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | No
 def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, coarse_onnx: str | Path,
                  detail_onnx: str | Path | None, fit_npz: str | Path, configs: Mapping[str, Any],
                  training_data: Mapping[str, Any], metrics: Mapping[str, Any], opset: int,
-                 force: bool = False, coarse_base: CoarseBase | str = CoarseBase.BODY) -> Path:
+                 force: bool = False, coarse_base: CoarseBase | str = CoarseBase.BODY,
+                 heading: Heading | str = Heading.WORLD) -> Path:
     """Copy exported models and the fit model into a new bundle folder and write its manifest.
 
     Args:
@@ -225,6 +234,7 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         metrics: validation metrics (JSON-able), e.g. mean vertex error [mm].
         opset: the ONNX opset of the exported files.
         coarse_base: what the coarse model's displacement is added to, as it was trained.
+        heading: the frame the models were trained to see the body in.
     Returns:
         The bundle folder.
     """
@@ -256,6 +266,7 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
                               "config": dict(configs.get(tier.value, {}))}
         if tier is Tier.COARSE:
             models[tier.value]["base"] = CoarseBase(coarse_base).value
+            models[tier.value]["heading"] = Heading(heading).value
         tiers.append(tier.value)
     shutil.copyfile(fit_npz, out / _FIT)
     files[_FIT] = file_sha256(out / _FIT)

@@ -1,4 +1,4 @@
-"""One garment animated by a model bundle (the coarse and detail tiers of METHOD.md).
+"""One garment animated by a model bundle (the coarse and detail tiers of docs/method.md).
 
 Everything that depends only on the garment-body pair is computed once, when a
 :class:`LearnedGarment` is made: the association (through the skinning binding), the
@@ -113,5 +113,6 @@ class LearnedGarment:
 
         points, moved = run_tiers(self.body, self.pair, poses, transl, run_coarse,
                                   run_detail if detail is not None else None, batch_size=batch_size,
-                                  margin=self.margin, coarse_base=self.bundle.coarse_base)
+                                  margin=self.margin, coarse_base=self.bundle.coarse_base,
+                                  heading=self.bundle.heading)
         return LearnedFrames(points=points, moved=moved)
