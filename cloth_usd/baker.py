@@ -26,6 +26,8 @@ from . import __version__
 from .core.body import BodyModel, load_body_model, shape_body
 from .core.files import file_sha256
 from .core.frames import CanonicalMotion, canonical_motion
+from .core.graph import directed_edges
+from .core.guard import GuardLimits, check_frames
 from .core.limits import BETA_LIMIT, betas_outside, pose_outliers
 from .core.scene import Character, Garment, Scene, Tier
 from .core.skinning import SkinBinding, bind_garment, skin_garment
@@ -35,7 +37,7 @@ if TYPE_CHECKING:
     from .runtime.bundle import ModelBundle
 
 __all__ = ["FrameRange", "GarmentReport", "BakeResult", "BakePlan", "ModelCache", "bake", "bake_plan",
-           "stitch_chunks", "parse_frames", "parse_tier", "FAR_FROM_BODY", "LEARNED_BATCH_VERTICES", "MAX_OFFSET"]
+           "stitch_chunks", "parse_frames", "parse_tier", "FAR_FROM_BODY", "LEARNED_BATCH_VERTICES"]
 
 log = logging.getLogger(__name__)
 
@@ -45,9 +47,6 @@ FAR_FROM_BODY = 0.10
 #: Garment vertices per learned-model call when ``bake(batch_size=None)``: the model's
 #: activations grow with frames x vertices (about 100 MiB per 4000-vertex frame at width 0.125).
 LEARNED_BATCH_VERTICES = 16_000
-#: Largest distance [m] a learned tier may move a vertex from its skinned position; a
-#: larger (or non-finite) model output is clamped there (or falls back to skinning), with a warning.
-MAX_OFFSET = 0.5
 
 
 @dataclass(frozen=True)
@@ -121,7 +120,11 @@ class GarmentReport:
     removed, over all frames [mm] (canonical body frame)."""
     max_offset_mm: float = 0.0
     """Largest distance of a baked vertex from its skinned position [mm] (0 for the
-    skinning tier); never more than :data:`MAX_OFFSET`."""
+    skinning tier); never more than the guard's :attr:`~cloth_usd.core.guard.GuardLimits.max_offset`."""
+    fallback_coarse: int = 0
+    """Detail-tier frames the guard replaced by the coarse tier (:mod:`cloth_usd.core.guard`)."""
+    fallback_skinning: int = 0
+    """Learned-tier frames the guard replaced by the skinning tier."""
     warnings: tuple[str, ...] = ()
     """The warnings logged for this garment (inputs outside the trained range, ...)."""
 
@@ -285,11 +288,14 @@ def _open(scene_path: str | Path) -> tuple[Any, list[str]]:
 
 
 def _setup(stage, protected: list[str], *, frames, garments, tier, body_model, models,
-           cache: ModelCache) -> _Setup:
+           cache: ModelCache, joint_map=None) -> _Setup:
+    from .core.joint_names import as_joint_map
+
     from .usd.read import read_scene
 
     tier = parse_tier(tier)
-    scene = read_scene(stage)
+    joint_map = as_joint_map(joint_map)  # read once: the scene and the digest see the same map
+    scene = read_scene(stage, joint_map=joint_map)
     source = scene.stage.identifier
     chosen = _select_garments(scene, garments, source)
     if isinstance(models, (str, Path)):
@@ -303,18 +309,21 @@ def _setup(stage, protected: list[str], *, frames, garments, tier, body_model, m
         gender = characters[g.body_path].gender
         if gender not in bodies:
             bodies[gender] = cache.body(body_model, gender)
-    digest = _inputs_digest(protected, frange, chosen, tiers, characters, bodies)
+    digest = _inputs_digest(protected, frange, chosen, tiers, characters, bodies,
+                            dict(joint_map.entries) if joint_map is not None else {})
     return _Setup(stage=stage, scene=scene, protected=protected, chosen=chosen, tiers=tiers,
                   frange=frange, bodies=bodies, inputs_sha256=digest)
 
 
 def _inputs_digest(layer_files: Sequence[str], frange: FrameRange, chosen: Sequence[Garment],
-                   tiers: dict, characters: dict[str, Character], bodies: dict[str, BodyModel]) -> str:
+                   tiers: dict, characters: dict[str, Character], bodies: dict[str, BodyModel],
+                   joint_map: dict[str, int]) -> str:
     """sha256 of everything the cache depends on (see :attr:`BakePlan.inputs_sha256`)."""
     files = [p for p in layer_files if p and os.path.isfile(p)]
     layers = [file_sha256(files[0])] + sorted(file_sha256(p) for p in files[1:]) if files else []
     payload = {
         "tool_version": __version__,
+        **({"joint_map": joint_map} if joint_map else {}),  # absent without a map: older digests hold
         "layers": layers,
         "frames": [repr(float(frange.start)), repr(float(frange.end)), repr(float(frange.step))],
         "garments": {g.prim_path: {"tier": tiers[g.prim_path][0].value,
@@ -343,12 +352,12 @@ def bake_plan(scene_path: str | Path, output: str | Path | None = None, *,
               frames: FrameRange | str | None = None, garments: Sequence[str] | None = None,
               tier: Tier | str | None = None, body_model: str | Path | None = None,
               models: str | Path | Sequence[str | Path] | None = None,
-              cache: ModelCache | None = None) -> BakePlan:
+              cache: ModelCache | None = None, joint_map: dict[str, str] | str | Path | None = None) -> BakePlan:
     """Resolve a bake without computing it: its frames, garments and inputs digest, and
     whether ``output`` already holds it. Arguments as for :func:`bake`."""
     stage, protected = _open(scene_path)
     setup = _setup(stage, protected, frames=frames, garments=garments, tier=tier, body_model=body_model,
-                   models=models, cache=cache or ModelCache())
+                   models=models, cache=cache or ModelCache(), joint_map=joint_map)
     return BakePlan(frames=setup.frange, garments=tuple(g.prim_path for g in setup.chosen),
                     inputs_sha256=setup.inputs_sha256,
                     current=output is not None and _is_current(output, setup))
@@ -360,7 +369,8 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
          body_model: str | Path | None = None, chunk: int = 64,
          progress: bool = False, models: str | Path | Sequence[str | Path] | None = None,
          batch_size: int | None = None, skip_current: bool = False, cache: ModelCache | None = None,
-         on_progress: Callable[[str, int, int], None] | None = None) -> BakeResult:
+         on_progress: Callable[[str, int, int], None] | None = None, strict: bool = False,
+         guard: GuardLimits = GuardLimits(), joint_map: dict[str, str] | str | Path | None = None) -> BakeResult:
     """Bake every enabled garment (or the named ones) of a stage into a point-cache layer.
 
     Args:
@@ -387,6 +397,11 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
         cache: body models, bundles and bound garments to reuse across bakes.
         on_progress: called with ``(garment prim, frames done, frames total)`` after
             each batch of frames is added to the (temporary) layer.
+        strict: a learned frame the guard rejects is an error (nothing is written) instead
+            of falling back to the next safer tier for that frame.
+        guard: when a learned frame is not a garment (:mod:`cloth_usd.core.guard`).
+        joint_map: ``{their joint name: SMPL joint name}`` or a JSON / TOML file of it, for
+            skeletons named in no known convention (:mod:`cloth_usd.core.joint_names`).
     """
     from .usd.read import garment_from_internal, read_motion
     from .usd.write import CacheLayerWriter, check_output_path, write_shot_layer
@@ -398,7 +413,7 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
     if shot is not None:
         check_output_path(shot, force=force or skip_current, protected=protected)
     setup = _setup(stage, protected, frames=frames, garments=garments, tier=tier, body_model=body_model,
-                   models=models, cache=cache)
+                   models=models, cache=cache, joint_map=joint_map)
     scene, times = setup.scene, setup.frange.times()
     scene_file = Path(stage.GetRootLayer().realPath)
     if skip_current and _is_current(output, setup):
@@ -431,7 +446,8 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
             report = _bake_garment(stage, writer, garment, char, body, motion, times, g_tier,
                                    chunk=chunk, progress=progress, garment_from_internal=garment_from_internal,
                                    bundle=g_bundle, batch_size=batch_size, cache=cache, notes=notes,
-                                   source=scene.stage.identifier, on_progress=on_progress)
+                                   source=scene.stage.identifier, on_progress=on_progress,
+                                   strict=strict, guard=guard)
             reports.append(report)
         used = {b.sha256: b for _, b in setup.tiers.values() if b is not None}
         provenance = _provenance(scene, setup.frange, setup.bodies, reports, list(used.values()))
@@ -480,8 +496,8 @@ def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyMo
                   motion: CanonicalMotion, times: np.ndarray, tier: Tier, *, chunk: int, progress: bool,
                   garment_from_internal, bundle: "ModelBundle | None" = None,
                   batch_size: int | None = None, cache: ModelCache | None = None, notes: Sequence[str] = (),
-                  source: str = "", on_progress: Callable[[str, int, int], None] | None = None
-                  ) -> GarmentReport:
+                  source: str = "", on_progress: Callable[[str, int, int], None] | None = None,
+                  strict: bool = False, guard: GuardLimits = GuardLimits()) -> GarmentReport:
     from tqdm.auto import tqdm
 
     cache = cache or ModelCache()
@@ -513,7 +529,9 @@ def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyMo
             batch_size = max(1, min(16, LEARNED_BATCH_VERTICES // max(1, learned.num_vertices)))
         chunk = batch_size
     moved, max_disp, max_off = 0, 0.0, 0.0
-    fixes: list[tuple[str, float, int]] = []
+    edges = directed_edges(garment.triangles, binding.rest_points.shape[0])
+    edges = edges[edges[:, 0] < edges[:, 1]]
+    fallbacks: list[tuple[float, Tier, str]] = []  # (time code, tier used instead, why)
     with tqdm(total=num_t, desc=garment.prim_path, unit="frame", disable=not progress,
               leave=False) as bar:
         for lo in range(0, num_t, chunk):
@@ -522,9 +540,15 @@ def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyMo
             pts = skinned
             if learned is not None:
                 frames = learned.evaluate(tier, poses[lo:hi], transl[lo:hi], batch_size=batch_size)
-                pts, off, fixed = _bound_offsets(frames.points, skinned)
-                max_off = max(max_off, off)
-                fixes.extend((kind, float(times[lo + i]), n) for kind, i, n in fixed)
+                pts, used = _guarded(learned, tier, frames.points, skinned, poses[lo:hi], transl[lo:hi], edges,
+                                     guard, batch_size)
+                for i, (replaced_by, why) in used.items():
+                    if strict:
+                        raise GarmentError(f"{where}: the {tier.value} tier's frame {times[lo + i]:g} is not a "
+                                           f"garment ({why}); --strict refuses it and nothing was written. Bake "
+                                           "without --strict to replace such frames by a safer tier")
+                    fallbacks.append((float(times[lo + i]), replaced_by, why))
+                max_off = max(max_off, float(np.linalg.norm(pts - skinned, axis=-1).max(initial=0.0)))
                 moved += int(frames.moved.sum())
             bad = ~np.isfinite(pts).all(axis=(1, 2))
             if bad.any():
@@ -539,13 +563,11 @@ def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyMo
             bar.update(hi - lo)
             if on_progress is not None:
                 on_progress(garment.prim_path, hi, num_t)
-    for kind in ("non-finite", "too far"):
-        hits = [(t, n) for k, t, n in fixes if k == kind]
+    for replaced_by in (Tier.COARSE, Tier.SKINNING):
+        hits = [(t, why) for t, by, why in fallbacks if by is replaced_by]
         if hits:
-            what = ("was not finite; those vertices fall back to skinning" if kind == "non-finite" else
-                    f"moved vertices more than {MAX_OFFSET:g} m from their skinned position; clamped")
-            w = (f"{where}: the {tier.value} model output {what}: {sum(n for _, n in hits)} vertex-frames, "
-                 f"first at frame {hits[0][0]:g}, in {len(hits)} frames")
+            w = (f"{where}: {len(hits)} of {num_t} frames of the {tier.value} tier are not a garment and were "
+                 f"replaced by the {replaced_by.value} tier, first at frame {hits[0][0]:g} ({hits[0][1]})")
             log.warning("%s", w)
             warnings.append(w)
     log.info("%s: %d vertices, %d frames, tier %s", garment.prim_path, binding.rest_points.shape[0],
@@ -556,29 +578,38 @@ def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyMo
                          bundle=None if learned is None else bundle.name,
                          fit=None if learned is None else tuple(float(a) for a in learned.alpha),
                          postprocess_moved=moved, max_displacement_mm=max_disp * 1000.0,
-                         max_offset_mm=max_off * 1000.0, warnings=tuple(warnings))
+                         max_offset_mm=max_off * 1000.0, warnings=tuple(warnings),
+                         fallback_coarse=sum(by is Tier.COARSE for _, by, _ in fallbacks),
+                         fallback_skinning=sum(by is Tier.SKINNING for _, by, _ in fallbacks))
 
 
-def _bound_offsets(points: np.ndarray, skinned: np.ndarray
-                   ) -> tuple[np.ndarray, float, list[tuple[str, int, int]]]:
-    """Keep a learned tier's points finite and within :data:`MAX_OFFSET` of skinning.
+def _guarded(learned, tier: Tier, points: np.ndarray, skinned: np.ndarray, poses: np.ndarray,
+             transl: np.ndarray, edges: np.ndarray, limits: GuardLimits, batch_size: int
+             ) -> tuple[np.ndarray, dict[int, tuple[Tier, str]]]:
+    """A learned tier's frames, each one that is not a garment replaced by the next safer tier.
 
     Args:
-        points: (T, N, 3) the model's garment points [m].
-        skinned: (T, N, 3) the skinned points of the same frames [m].
+        learned: the garment's :class:`~cloth_usd.runtime.garment.LearnedGarment`.
+        points: (T, N, 3) the ``tier`` output [m]; skinned: (T, N, 3) the skinned garment [m].
+        poses: (T, 72) [rad]; transl: (T, 3) [m]: the frames, to evaluate the coarse tier on.
+        edges: (E, 2) the garment's edges.
     Returns:
-        ``(points (T, N, 3), largest offset kept [m], [(kind, frame index, vertices)])``
-        with kind ``non-finite`` or ``too far``.
+        ``(points (T, N, 3), {frame index: (tier used instead, why the frame was rejected)})``.
     """
-    offset = points - skinned
-    finite = np.isfinite(offset).all(axis=-1)  # (T, N)
-    offset = np.where(finite[..., None], offset, 0.0)
-    length = np.linalg.norm(offset, axis=-1)
-    far = length > MAX_OFFSET
-    scale = np.where(far, MAX_OFFSET / np.maximum(length, 1e-12), 1.0)
-    fixed = [("non-finite", int(t), int(n)) for t, n in enumerate((~finite).sum(axis=1)) if n]
-    fixed += [("too far", int(t), int(n)) for t, n in enumerate(far.sum(axis=1)) if n]
-    return skinned + offset * scale[..., None], float(np.minimum(length, MAX_OFFSET).max(initial=0.0)), fixed
+    rest = learned.binding.rest_points
+    faults = check_frames(points, skinned, rest, edges, limits)
+    out = np.array(points, dtype=np.float64)
+    bad = np.flatnonzero(~faults.ok)
+    used: dict[int, tuple[Tier, str]] = {}
+    if bad.size and tier is Tier.DETAIL:
+        coarse = learned.evaluate(Tier.COARSE, poses[bad], transl[bad], batch_size=batch_size).points
+        ok = check_frames(coarse, skinned[bad], rest, edges, limits).ok
+        out[bad[ok]] = coarse[ok]
+        used.update((int(i), (Tier.COARSE, faults.reasons[i])) for i in bad[ok])
+        bad = bad[~ok]
+    out[bad] = skinned[bad]
+    used.update((int(i), (Tier.SKINNING, faults.reasons[i])) for i in bad)
+    return out, used
 
 
 def stitch_chunks(chunks: Sequence[str | Path], output: str | Path, *, inputs_sha256: str = "",
@@ -621,7 +652,7 @@ def stitch_chunks(chunks: Sequence[str | Path], output: str | Path, *, inputs_sh
     for prim, g in merged["garments"].items():
         parts = [p["garments"][prim] for p in provs]
         g["frames"] = sum(int(x["frames"]) for x in parts)
-        for key in ("postprocess_moved",):
+        for key in ("postprocess_moved", "fallback_coarse", "fallback_skinning"):
             if key in g:
                 g[key] = sum(int(x.get(key, 0)) for x in parts)
         for key in ("max_displacement_mm", "max_offset_mm"):
@@ -638,7 +669,8 @@ def _garment_provenance(r: GarmentReport) -> dict:
         out["fit"] = "not computed (skinning tier)"
     else:  # a string of numbers: VtDictionary keeps no plain list of floats
         out.update(fit=" ".join(f"{a:.6g}" for a in r.fit), model_bundle=r.bundle,
-                   postprocess_moved=r.postprocess_moved, max_offset_mm=round(r.max_offset_mm, 3))
+                   postprocess_moved=r.postprocess_moved, max_offset_mm=round(r.max_offset_mm, 3),
+                   fallback_coarse=r.fallback_coarse, fallback_skinning=r.fallback_skinning)
     return out
 
 

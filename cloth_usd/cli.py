@@ -15,6 +15,9 @@ __all__ = ["main"]
 
 log = logging.getLogger("cloth_usd")
 
+_JOINT_MAP_HELP = ("JSON object (or .toml table) {\"their joint name\": \"SMPL joint name\"} for skeletons "
+                   "named in no known convention (smpl, smplx, smpl-fbx, meshcapade, phc)")
+
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cloth-usd", description="Learned garment animation for USD shots.")
@@ -24,6 +27,7 @@ def _parser() -> argparse.ArgumentParser:
 
     i = sub.add_parser("inspect", help="list characters, garments, frame range, units and problems")
     i.add_argument("scene", help="USD stage to read")
+    i.add_argument("--joint-map", metavar="FILE", help=_JOINT_MAP_HELP)
 
     b = sub.add_parser("bake", help="write a garment point-cache layer")
     b.add_argument("scene", help="USD stage to read (never modified)")
@@ -36,8 +40,12 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--models", metavar="DIR",
                    help="model bundle folder, or a folder of bundles, for the coarse and detail tiers "
                         "(default: the shipped models/bundles)")
+    b.add_argument("--joint-map", metavar="FILE", help=_JOINT_MAP_HELP)
     b.add_argument("--force", action="store_true", help="replace existing output files")
     b.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    b.add_argument("--strict", action="store_true",
+                   help="a learned frame that is not a garment (NaN, torn, far from the body) is an error "
+                        "(exit 2, nothing written) instead of being replaced by the next safer tier")
 
     d = sub.add_parser("doctor", help="check the body model file(s) and the runtime")
     d.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
@@ -141,7 +149,7 @@ def _datagen(args: argparse.Namespace) -> int:
 def _inspect(args: argparse.Namespace) -> int:
     from .inspection import format_report, inspect_stage
 
-    report = inspect_stage(args.scene)
+    report = inspect_stage(args.scene, joint_map=args.joint_map)
     sys.stdout.write(format_report(report) + "\n")
     return 1 if report.problems else 0
 
@@ -151,13 +159,17 @@ def _bake(args: argparse.Namespace) -> int:
 
     result = bake(args.scene, args.output, shot=args.shot, frames=args.frames, garments=args.garment,
                   tier=args.tier, force=args.force, body_model=args.body_model, models=args.models,
-                  progress=not args.no_progress and sys.stderr.isatty())
+                  joint_map=args.joint_map, progress=not args.no_progress and sys.stderr.isatty(),
+                  strict=args.strict)
     for g in result.garments:
         sys.stdout.write(f"{g.prim_path}: {g.frames} frames, {g.vertices} vertices, tier {g.tier.value}\n")
         if g.bundle is not None:
             sys.stdout.write(f"{g.prim_path}: bundle {g.bundle}, fit {' '.join(f'{a:.3f}' for a in g.fit)}, "
                              f"post-process moved {g.postprocess_moved} vertices "
                              f"({g.postprocess_moved / max(1, g.frames):.1f} per frame)\n")
+            if g.fallback_coarse or g.fallback_skinning:
+                sys.stdout.write(f"{g.prim_path}: guard replaced {g.fallback_coarse} frames by coarse and "
+                                 f"{g.fallback_skinning} by skinning (not a garment; see the warnings)\n")
     per_frame = result.seconds / max(1, result.times.shape[0]) * 1000.0
     sys.stdout.write(f"wrote {result.cache} ({result.times.shape[0]} frames, {result.seconds:.2f} s, "
                      f"{per_frame:.1f} ms/frame)\n")

@@ -2,9 +2,12 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from os import PathLike
 from pathlib import Path
 
+from .core.joint_names import JointMap
 from .core.scene import Scene
 
 __all__ = ["InspectReport", "inspect_stage", "format_report"]
@@ -17,15 +20,24 @@ class InspectReport:
     scene: Scene
     problems: tuple[str, ...] = field(default=())
     """One line each: contract violations found (the bake would refuse these prims)."""
+    skipped: tuple[str, ...] = field(default=())
+    """One line each: Skeletons no garment targets that are not SMPL skeletons, why and what to do."""
 
 
-def inspect_stage(path: str | Path) -> InspectReport:
-    """Read a stage leniently: every contract violation becomes a problem line."""
+def inspect_stage(path: str | Path, *,
+                  joint_map: JointMap | Mapping[str, str] | str | PathLike | None = None) -> InspectReport:
+    """Read a stage leniently: every contract violation becomes a problem line.
+
+    Args:
+        joint_map: ``{their joint name: SMPL joint name}`` or a JSON / TOML file of it
+            (see :func:`cloth_usd.usd.read.read_scene`).
+    """
     from .usd.read import open_stage, read_scene
 
     problems: list[str] = []
-    scene = read_scene(open_stage(path), problems=problems)
-    return InspectReport(scene=scene, problems=tuple(problems))
+    skipped: list[str] = []
+    scene = read_scene(open_stage(path), problems=problems, skipped=skipped, joint_map=joint_map)
+    return InspectReport(scene=scene, problems=tuple(problems), skipped=tuple(skipped))
 
 
 def format_report(report: InspectReport) -> str:
@@ -44,6 +56,7 @@ def format_report(report: InspectReport) -> str:
         betas = ", ".join(f"{b:.2f}" for b in c.betas[:4]) + ", ..."
         lines.append(f"  {c.prim_path}  gender {c.gender}  betas [{betas}]"
                      + ("" if c.betas_authored else "  (smpl:betas missing: zeros)"))
+    lines.extend(f"  skipped {line}" for line in report.skipped)
     lines.append(f"garments    {len(report.scene.garments)}")
     for g in report.scene.garments:
         state = "enabled" if g.enabled else "disabled"

@@ -16,7 +16,9 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd
 
-from cloth_usd.baker import MAX_OFFSET, _bound_offsets, bake
+from cloth_usd.baker import bake
+from cloth_usd.core.guard import GuardLimits
+from cloth_usd.errors import GarmentError
 from cloth_usd.core.body import load_body_model, shape_body
 from cloth_usd.core.limits import JOINT_LIMITS, pose_outliers
 from cloth_usd.datagen import walk_cycle
@@ -27,6 +29,7 @@ from cloth_usd.usd.author import author_garment, author_skeleton, set_stage_meta
 from test_batch import tube
 
 PRIM = "/Char/Tube"
+MAX_OFFSET = GuardLimits().max_offset
 
 
 @pytest.fixture(scope="module")
@@ -150,31 +153,32 @@ def test_learned_tier_at_extreme_poses_stays_finite_and_bounded(posed_stage, tmp
     assert [m for m in _warnings(caplog) if "joint limits at frame 2" in m and PRIM in m]
 
 
-@pytest.mark.parametrize("scale, kind", [(5.0, "moved vertices more than 0.5 m"), (float("nan"), "was not finite")])
-def test_a_wild_model_output_is_clamped_or_falls_back_with_a_warning(posed_stage, tmp_path, caplog, scale, kind):
+@pytest.mark.parametrize("scale, why", [(5.0, "a vertex 5.0"), (float("nan"), "not finite")])
+def test_a_wild_model_output_is_replaced_by_skinning_frame_by_frame(posed_stage, tmp_path, caplog, scale, why):
     bundle = fake_bundle(tmp_path / "wild", scale)
     with caplog.at_level(logging.WARNING, logger="cloth_usd.baker"):
         result = bake(posed_stage, tmp_path / "c.usdc", tier="coarse", models=bundle, frames="1:3")
     pts = read_points(tmp_path / "c.usdc")
-    assert np.isfinite(pts).all()
     bake(posed_stage, tmp_path / "s.usdc", frames="1:3")
-    gap = np.linalg.norm(pts - read_points(tmp_path / "s.usdc"), axis=-1)
-    assert gap.max() <= MAX_OFFSET + 1e-4
-    if scale != scale:  # NaN: the skinned points
-        assert gap.max() < 1e-5
-    (message,) = [m for m in _warnings(caplog) if kind in m]
-    assert f"<{PRIM}>: the coarse model output" in message and "first at frame 1, in 3 frames" in message
-    assert result.garments[0].max_offset_mm <= MAX_OFFSET * 1000.0
+    np.testing.assert_allclose(pts, read_points(tmp_path / "s.usdc"), atol=1e-6)  # whole frames, skinned
+    (message,) = [m for m in _warnings(caplog) if "not a garment" in m]
+    assert (f"<{PRIM}>: 3 of 3 frames of the coarse tier are not a garment and were replaced by the skinning "
+            f"tier, first at frame 1 ({why}") in message
+    g = result.garments[0]
+    assert (g.fallback_skinning, g.fallback_coarse, g.max_offset_mm) == (3, 0, 0.0)
+    prov = Sdf.Layer.FindOrOpen(str(tmp_path / "c.usdc")).customLayerData["cloth_usd"]["garments"][PRIM]
+    assert (prov["fallback_skinning"], prov["fallback_coarse"]) == (3, 0)
 
 
-def test_bound_offsets_keeps_finite_points_within_max_offset():
-    skinned = np.zeros((2, 3, 3))
-    points = np.array([[[0.1, 0, 0], [np.nan, 0, 0], [3.0, 4.0, 0]], [[0, 0, np.inf], [0, 0, 0], [0, 0, 0.2]]])
-    out, largest, fixed = _bound_offsets(points, skinned)
-    np.testing.assert_allclose(out[0], [[0.1, 0, 0], [0, 0, 0], [0.3, 0.4, 0]])
-    np.testing.assert_allclose(out[1], [[0, 0, 0], [0, 0, 0], [0, 0, 0.2]])
-    assert largest == pytest.approx(MAX_OFFSET) and sorted(fixed) == [("non-finite", 0, 1), ("non-finite", 1, 1),
-                                                                      ("too far", 0, 1)]
+def test_strict_refuses_a_frame_that_is_not_a_garment_and_writes_nothing(posed_stage, tmp_path):
+    bundle = fake_bundle(tmp_path / "wild", 5.0)
+    with pytest.raises(GarmentError, match=rf"<{PRIM}>: the coarse tier's frame 1 is not a garment \(a vertex "
+                                           r"5\.0\d m .*--strict refuses it and nothing was written"):
+        bake(posed_stage, tmp_path / "c.usdc", tier="coarse", models=bundle, frames="1:3", strict=True)
+    assert not list(tmp_path.glob("*.usdc")) and not list(tmp_path.glob(".*tmp*"))
+    plausible = fake_bundle(tmp_path / "plausible", 0.005)
+    result = bake(posed_stage, tmp_path / "c.usdc", tier="coarse", models=plausible, frames="1:3", strict=True)
+    assert result.garments[0].fallback_skinning == 0
 
 
 def test_betas_at_plus_minus_5_warn_and_stay_finite(body, tmp_path, caplog):
@@ -254,10 +258,12 @@ def test_odd_garments_bake_finite(body, tmp_path, caplog, name, tier, odd_bundle
         assert len(far) == 1 and f"<{PRIM}>: the garment lies 2." in far[0] and "check its cloth:body" in far[0]
     else:
         assert not far, far
-    # The learned tier puts garments on the body: vertices metres away (the far garment, the
-    # stray vertex among the pieces) would jump there; they are clamped, with a warning.
-    clamped = [m for m in _warnings(caplog) if "model output moved vertices more than" in m]
-    assert len(clamped) == (tier == "coarse" and name in ("far_from_body", "disconnected_pieces")), clamped
+    # The fake model puts garments on the body (I M_b plus 5 mm): vertices metres away (the far
+    # garment, the stray vertex among the pieces) would jump there, and the tiny tube, whose
+    # neighbours map to body vertices far apart, has its edges stretched past 2x; those frames
+    # are skinned, with a warning.
+    replaced = [m for m in _warnings(caplog) if "not a garment and were replaced by the skinning tier" in m]
+    assert len(replaced) == (tier == "coarse" and name in ("far_from_body", "disconnected_pieces", "tiny")), replaced
     assert not [m for m in _warnings(caplog) if "was not finite" in m]
 
 
@@ -309,3 +315,17 @@ def test_a_10000_frame_shot_streams_in_bounded_memory(body, tmp_path):
     print(f"10,000 frames x 192 vertices: peak RSS {rss['long']:.0f} MiB, +{growth:.0f} MiB over 100 frames; "
           f"cache {cache_mib:.0f} MiB")
     assert growth < 2.0 * cache_mib + 16.0
+
+
+def test_strict_from_the_command_line_is_one_line_and_exit_2(posed_stage, tmp_path, capsys):
+    from cloth_usd.cli import main
+
+    bundle = fake_bundle(tmp_path / "wild", 5.0)
+    args = ["bake", str(posed_stage), "-o", str(tmp_path / "c.usdc"), "--tier", "coarse", "--models", str(bundle),
+            "--frames", "1:3", "--no-progress"]
+    assert main(args + ["--strict"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the coarse tier's frame 1 is not a garment" in err[0] and "--strict" in err[0]
+    assert not (tmp_path / "c.usdc").exists()
+    assert main(args) == 0
+    assert "guard replaced 0 frames by coarse and 3 by skinning" in capsys.readouterr().out

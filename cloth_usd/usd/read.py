@@ -1,4 +1,4 @@
-"""Reading a USD stage into cloth_usd's dataclasses (see ``/work/shared/SCENE.md``).
+"""Reading a USD stage into cloth_usd's dataclasses (see docs/scene_contract.md in the repository).
 
 This is the only module that reads a scene. Everything it returns is a frozen
 dataclass of numpy arrays in the internal frame (metres, Y-up, SMPL's axes); no
@@ -13,10 +13,12 @@ from __future__ import annotations
 import logging
 import os
 import re
+from collections.abc import Mapping
 
 import numpy as np
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdSkel
 
+from cloth_usd.core.joint_names import JointMap, as_joint_map, match_joints
 from cloth_usd.core.rotations import matrix_to_axis_angle
 from cloth_usd.core.scene import Category, Character, Garment, Motion, Scene, StageInfo, Tier
 from cloth_usd.core.smpl import JOINT_NAMES, NUM_BETAS, NUM_JOINTS, PARENTS
@@ -116,23 +118,38 @@ def read_stage_info(stage: Usd.Stage) -> StageInfo:
     )
 
 
-def read_scene(stage: Usd.Stage, *, problems: list[str] | None = None) -> Scene:
+def read_scene(
+    stage: Usd.Stage,
+    *,
+    problems: list[str] | None = None,
+    skipped: list[str] | None = None,
+    joint_map: JointMap | Mapping[str, str] | str | os.PathLike | None = None,
+) -> Scene:
     """Stage info, characters and garments, as the scene contract defines them.
 
     Characters are every Skeleton a garment's ``cloth:body`` targets, plus every
-    other Skeleton that carries all 24 SMPL joints and reads cleanly (one that
-    does not is skipped with a warning, or a problem line).
+    other Skeleton whose joints name all 24 SMPL joints and that reads cleanly (one
+    that does not is skipped with a warning, or a problem line). Joint names may
+    follow any convention of :mod:`cloth_usd.core.joint_names`, or ``joint_map``.
 
     Args:
         problems: None to raise on the first contract breach. A list to read
             leniently (``cloth-usd inspect``): each breach is appended as one line
             and its prim left out, together with the garments whose body it is.
+        skipped: a list to which each untargeted Skeleton that is not an SMPL
+            skeleton is appended as one line saying why and what to do (they are
+            left out either way, not a breach).
+        joint_map: ``{their joint name: SMPL joint name}``, as a mapping, a JSON or
+            TOML file, or a :class:`~cloth_usd.core.joint_names.JointMap`; its
+            entries come before the conventions' names.
 
     Raises:
         SceneError, GarmentError: the stage breaks the scene contract (always for
         stage-level metadata; for prims only when ``problems`` is None); the
         message names the file, the prim and what to author.
+        ArgumentError: ``joint_map`` is unreadable or invalid.
     """
+    joint_map = as_joint_map(joint_map)
     info = read_stage_info(stage)
     s2i = info.stage_to_internal
     xf_cache = UsdGeom.XformCache(_EARLIEST)
@@ -158,11 +175,14 @@ def read_scene(stage: Usd.Stage, *, problems: list[str] | None = None) -> Scene:
     characters = []
     for prim in (p for p in prims if p.IsA(UsdSkel.Skeleton)):
         if str(prim.GetPath()) in targeted:
-            character = attempt(_read_character, stage, prim, s2i, xf_cache, skel_cache)
-        elif _has_smpl_joint_names(prim):
-            character = _read_untargeted(stage, prim, s2i, xf_cache, skel_cache, problems)
-        else:
+            character = attempt(_read_character, stage, prim, s2i, xf_cache, skel_cache, joint_map)
+        elif (match := match_joints(_joint_paths(prim), joint_map)).missing:
+            _log.info("skipping Skeleton %s: %s", prim.GetPath(), match.problem)
+            if skipped is not None:
+                skipped.append(f"{_where(stage, prim)}: {match.problem}")
             continue
+        else:
+            character = _read_untargeted(stage, prim, s2i, xf_cache, skel_cache, joint_map, problems)
         if character is not None:
             characters.append(character)
     garments = _drop_bodiless(stage, garments, {c.prim_path for c in characters}, problems)
@@ -175,11 +195,12 @@ def _read_untargeted(
     s2i: np.ndarray,
     xf_cache: UsdGeom.XformCache,
     skel_cache: UsdSkel.Cache,
+    joint_map: JointMap | None,
     problems: list[str] | None,
 ) -> Character | None:
     """A Skeleton no garment targets: a Character if it reads cleanly, else None and a note."""
     try:
-        return _read_character(stage, prim, s2i, xf_cache, skel_cache)
+        return _read_character(stage, prim, s2i, xf_cache, skel_cache, joint_map)
     except SceneError as exc:
         if problems is None:
             _log.warning("skipping a Skeleton that no garment targets: %s", exc)
@@ -213,11 +234,12 @@ def _read_character(
     s2i: np.ndarray,
     xf_cache: UsdGeom.XformCache,
     skel_cache: UsdSkel.Cache,
+    joint_map: JointMap | None = None,
 ) -> Character:
     """One Skeleton prim -> Character; raises SceneError on any contract breach."""
     where = _where(stage, prim)
-    joints = [str(j) for j in (UsdSkel.Skeleton(prim).GetJointsAttr().Get() or [])]
-    joint_indices = _smpl_joint_indices(joints, where)
+    joints = _joint_paths(prim)
+    joint_indices = _smpl_joint_indices(joints, where, joint_map)
     _check_hierarchy(joints, joint_indices, where)
     betas, betas_authored = _read_betas(prim, where)
     query = _skel_query(skel_cache, prim, where)
@@ -235,24 +257,19 @@ def _read_character(
     )
 
 
-def _smpl_joint_indices(joints: list[str], where: str) -> np.ndarray:
+def _smpl_joint_indices(joints: list[str], where: str, joint_map: JointMap | None) -> np.ndarray:
     """(24,) int64 index into ``joints`` of each SMPL joint, matched by last path element."""
-    found: dict[str, int] = {}
-    for i, name in enumerate(_leaf(j) for j in joints):
-        if name in JOINT_NAMES:
-            if name in found:
-                raise SceneError(
-                    f"{where}: SMPL joint '{name}' appears twice ({joints[found[name]]!r} and "
-                    f"{joints[i]!r}); rename one so each SMPL joint name is unique"
-                )
-            found[name] = i
-    missing = [n for n in JOINT_NAMES if n not in found]
-    if missing:
-        raise SceneError(
-            f"{where}: Skeleton lacks SMPL joint(s) {', '.join(missing)}; its joints must include "
-            f"all 24 SMPL joints, matched by the last element of each joint path"
-        )
-    return np.array([found[n] for n in JOINT_NAMES], dtype=np.int64)
+    match = match_joints(joints, joint_map)
+    if match.problem is not None:
+        raise SceneError(f"{where}: {match.problem}")
+    if match.naming != "smpl":
+        _log.info("%s: joints named as %s", where, match.naming)
+    return match.indices
+
+
+def _joint_paths(prim: Usd.Prim) -> list[str]:
+    """The Skeleton's ``joints``, as strings ([] when unauthored)."""
+    return [str(j) for j in (UsdSkel.Skeleton(prim).GetJointsAttr().Get() or [])]
 
 
 def _check_hierarchy(joints: list[str], joint_indices: np.ndarray, where: str) -> None:
@@ -311,12 +328,6 @@ def _read_gender(prim: Usd.Prim, where: str) -> str:
             f"{where}: smpl:gender is {str(value)!r}; valid values are {', '.join(_GENDERS)}"
         )
     return str(value)
-
-
-def _has_smpl_joint_names(prim: Usd.Prim) -> bool:
-    """True when the Skeleton's joint leaf names include all 24 SMPL joints."""
-    joints = UsdSkel.Skeleton(prim).GetJointsAttr().Get() or []
-    return set(JOINT_NAMES) <= {_leaf(str(j)) for j in joints}
 
 
 # -------------------------------------------------------------------------- motion
@@ -631,11 +642,6 @@ def _as_times(times) -> np.ndarray:
 def _authored_time(stage: Usd.Stage, key: str, getter) -> float | None:
     """A stage time-code metadatum, or None when the root layer does not author it."""
     return float(getter()) if stage.HasAuthoredMetadata(key) else None
-
-
-def _leaf(joint: str) -> str:
-    """Last element of a joint path: ``"pelvis/left_hip"`` -> ``"left_hip"``."""
-    return joint.rstrip("/").rsplit("/", 1)[-1]
 
 
 def _layer(stage: Usd.Stage) -> str:

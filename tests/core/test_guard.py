@@ -1,0 +1,60 @@
+"""core.guard: a learned frame that is not a garment is named, one reason per frame."""
+
+import numpy as np
+import pytest
+
+from cloth_usd.core.guard import GuardLimits, check_frames
+from cloth_usd.errors import ArgumentError
+
+# A 3 x 3 grid of 5 cm cells, its 8 triangles' 16 edges.
+_GRID = np.array([[x, 0.0, z] for z in (0.0, 0.05, 0.1) for x in (0.0, 0.05, 0.1)])
+_FACES = np.array([[0, 1, 4], [0, 4, 3], [1, 2, 5], [1, 5, 4], [3, 4, 7], [3, 7, 6], [4, 5, 8], [4, 8, 7]])
+_EDGES = np.unique(np.sort(np.concatenate([_FACES[:, [0, 1]], _FACES[:, [1, 2]], _FACES[:, [2, 0]]]), axis=1), axis=0)
+
+
+def _frames(*frames):
+    return np.stack(frames)
+
+
+def test_a_garment_near_its_skinned_self_passes():
+    skinned = _frames(_GRID, _GRID + [0.0, 0.1, 0.0])
+    points = skinned + np.random.default_rng(0).normal(0.0, 0.003, skinned.shape)
+    faults = check_frames(points, skinned, _GRID, _EDGES)
+    assert faults.ok.tolist() == [True, True] and faults.reasons == ("", "")
+
+
+def test_each_kind_of_fault_is_named():
+    skinned = _frames(_GRID, _GRID, _GRID, _GRID)
+    nan, far, torn = _GRID.copy(), _GRID.copy(), _GRID.copy()
+    nan[3, 1] = np.nan
+    far[:] += [0.0, 0.0, 0.2]  # the whole garment 20 cm off
+    torn[[2, 5, 8], 0] += 0.2  # one column pulled 20 cm out: its edges stretch 4-5x
+    faults = check_frames(_frames(_GRID, nan, far, torn), skinned, _GRID, _EDGES,
+                          GuardLimits(max_offset=0.25, stretch_quantile=0.9))
+    assert faults.ok.tolist() == [True, False, True, False]  # 20 cm off is within this 25 cm limit
+    assert faults.reasons[1] == "not finite"
+    assert faults.reasons[3].startswith("edges stretched") and "90th percentile (limit 2x)" in faults.reasons[3]
+    tight = check_frames(_frames(far), _frames(_GRID), _GRID, _EDGES, GuardLimits(max_offset=0.15))
+    assert tight.reasons == ("a vertex 0.20 m from its skinned position (limit 0.15 m)",)
+
+
+def test_stretch_is_measured_against_the_skinned_edge_where_skinning_stretches():
+    """Skinning itself stretches edges at joints; the learned tier is held to that, not to rest."""
+    skinned = _GRID * [3.0, 1.0, 1.0]  # every x edge 3x its rest length
+    faults = check_frames(_frames(skinned), _frames(skinned), _GRID, _EDGES, GuardLimits(max_offset=1.0))
+    assert faults.ok.tolist() == [True]
+    assert not check_frames(_frames(skinned), _frames(_GRID), _GRID, _EDGES, GuardLimits(max_offset=1.0)).ok[0]
+
+
+def test_millimetre_edges_are_measured_against_the_floor():
+    tiny = _GRID * 0.01  # 0.5 mm cells
+    moved = tiny + np.random.default_rng(1).normal(0.0, 0.0005, tiny.shape)
+    assert check_frames(_frames(moved), _frames(tiny), tiny, _EDGES).ok.tolist() == [True]
+    assert not check_frames(_frames(moved), _frames(tiny), tiny, _EDGES, GuardLimits(min_edge=1e-4)).ok[0]
+
+
+def test_bad_limits_and_shapes_are_refused():
+    with pytest.raises(ArgumentError, match="GuardLimits: need"):
+        GuardLimits(stretch=0.9)
+    with pytest.raises(ArgumentError, match=r"must be \(T, N, 3\)"):
+        check_frames(np.zeros((2, 4, 3)), np.zeros((2, 5, 3)), np.zeros((4, 3)), _EDGES)
