@@ -85,9 +85,15 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--view", default="three-quarter", help="front, side or three-quarter")
     r.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
 
-    tr = sub.add_parser("train", help="train the coarse or detail generator on a datagen data set")
+    tr = sub.add_parser("train", help="train the coarse or detail generator on a datagen data set, or the "
+                                      "coarse one on the garment's physics")
     tr.add_argument("tier", choices=["coarse", "detail"], help="which generator")
-    tr.add_argument("--data", required=True, help="data set folder (cloth-usd datagen)")
+    tr.add_argument("--data", required=True,
+                    help="data set folder (cloth-usd datagen); with --objective physics, a datagen config file "
+                         "whose garments, bodies and motions are trained on without simulating them")
+    tr.add_argument("--objective", choices=["supervised", "physics"],
+                    help="supervised (simulated data) or physics (the garment's energy; coarse only); "
+                         "overrides the config's"),
     tr.add_argument("-o", "--out", required=True, help="run folder: checkpoints, history.csv, curve.png")
     tr.add_argument("--config", help="training config (.json or .toml; see cloth_usd.nn.train.TrainConfig)")
     tr.add_argument("--coarse-run", help="detail: the trained coarse run folder (its predictions are M_coarse)")
@@ -100,7 +106,8 @@ def _parser() -> argparse.ArgumentParser:
     ex = sub.add_parser("export", help="export trained runs to ONNX and write a verified model bundle")
     ex.add_argument("--coarse-run", required=True, help="trained coarse run folder")
     ex.add_argument("--detail-run", help="trained detail run folder (optional)")
-    ex.add_argument("--data", required=True, help="the data set the runs were trained on (fit.npz, manifest)")
+    ex.add_argument("--data", required=True, help="the data set the runs were trained on (fit.npz, manifest), or "
+                                                  "the data set config of a physics-trained coarse run")
     ex.add_argument("-o", "--out", required=True, help="bundle folder to write")
     ex.add_argument("--name", required=True, help="bundle name, recorded in every cache it bakes")
     ex.add_argument("--category", default="tshirt", help="garment category (default tshirt)")
@@ -218,6 +225,9 @@ def _body(path: str | None):
 
 
 def _train(args: argparse.Namespace) -> int:
+    import dataclasses
+
+    from .errors import ArgumentError
     from .nn.train import load_train_config, resume_settings, train
 
     if args.threads:
@@ -230,16 +240,30 @@ def _train(args: argparse.Namespace) -> int:
         coarse_run = coarse_run or prior_coarse
     if config_path is not None or not args.resume:
         config = load_train_config(config_path, epochs=args.epochs)
+    if args.objective:
+        config = dataclasses.replace(config, objective=args.objective)
+
+    physics = config.objective.value == "physics"
+    mm = "mm from skinning" if physics else "mm"  # physics: val is the energy [J] above the skinned garment's
 
     def show(r) -> None:
         sys.stdout.write(f"epoch {r.epoch + 1}/{config.epochs}: train {r.train_loss:.4g}, val {r.val_loss:.4g} "
-                         f"({r.val_mm:.3f} mm), {r.seconds:.1f} s\n")
+                         f"({r.val_mm:.3f} {mm}), {r.seconds:.1f} s\n")
         sys.stdout.flush()
 
-    result = train(args.tier, args.data, args.out, config, coarse_run=coarse_run, device=args.device,
-                   resume=args.resume, body=_body(args.body_model), progress=show)
+    if physics:
+        from .nn.physics_train import train_physics
+
+        if args.tier != "coarse" or coarse_run or args.resume:
+            raise ArgumentError("--objective physics: trains the coarse tier, from the start (no --coarse-run, "
+                                "no --resume yet)")
+        result = train_physics(args.data, args.out, config, device=args.device, body=_body(args.body_model),
+                               progress=show)
+    else:
+        result = train(args.tier, args.data, args.out, config, coarse_run=coarse_run, device=args.device,
+                       resume=args.resume, body=_body(args.body_model), progress=show)
     best = next((r for r in result.history if r.epoch == result.best_epoch), result.history[-1])
-    sys.stdout.write(f"{args.tier}: best epoch {result.best_epoch + 1} (val {best.val_mm:.3f} mm); "
+    sys.stdout.write(f"{args.tier}: best epoch {result.best_epoch + 1} (val {best.val_loss:.4g}, {best.val_mm:.3f} {mm}); "
                      f"run in {result.run_dir} (best.pt, history.csv, curve.png)\n")
     return 0
 

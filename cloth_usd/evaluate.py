@@ -29,6 +29,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .core.body import BodyModel
+from .core.heading import Heading
 from .core.pipeline import CoarseBase, run_tiers
 from .core.skinning import skin_garment
 from .errors import ArgumentError
@@ -194,7 +195,7 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         log.warning("%s: the bundle was trained on another data set (manifest sha256 %s...)", data_dir,
                     str(trained_on)[:12])
     shipped_coarse = _session_coarse_fn(bundle_obj.session("coarse"))
-    runs: list[tuple[str, tuple, CoarseBase]] = []  # (label, models for run_tiers, their coarse base)
+    runs: list[tuple[str, tuple, CoarseBase, Heading]] = []  # (label, models for run_tiers, their base, heading)
     ablations: dict[str, dict] = {}
     if ablation_runs:
         from .nn.train import BEST, load_run, pick_device, torch_coarse_fn, torch_detail_fn
@@ -216,11 +217,12 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
                     log.warning("%s: trained on another coarse model than the bundle's", run.path)
             ablations[label] = record
             if run.tier.value == "detail":  # on the bundle's coarse model
-                runs.append((label, (shipped_coarse, torch_detail_fn(run.model, dev)), bundle_obj.coarse_base))
+                runs.append((label, (shipped_coarse, torch_detail_fn(run.model, dev)), bundle_obj.coarse_base,
+                             bundle_obj.heading))
             else:
-                runs.append((label, (torch_coarse_fn(run.model, dev),), run.config.coarse_base))
+                runs.append((label, (torch_coarse_fn(run.model, dev),), run.config.coarse_base, run.config.heading))
     tiers = ["skinning", "coarse"] + (["detail"] if "detail" in [t.value for t in bundle_obj.tiers] else []) \
-        + [label for label, _, _ in runs]
+        + [label for label, *_ in runs]
     test_garment = [c.meta for c in clips if c.split.value == "test_garment"]
     shirts = shirt_labels(test_garment)
     stats: dict[str, dict[str, ErrorStats]] = {}
@@ -246,9 +248,9 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         for tier in ("coarse", "detail"):
             if tier in tiers:
                 outputs[tier] = learned.evaluate(tier, clip.poses, clip.transl, batch_size=batch_size).points
-        for label_, models, base in runs:
+        for label_, models, base, heading in runs:
             outputs[label_] = run_tiers(body, learned.pair, clip.poses, clip.transl, *models, batch_size=batch_size,
-                                        margin=learned.margin, coarse_base=base)[0]
+                                        margin=learned.margin, coarse_base=base, heading=heading)[0]
         for tier, pts in outputs.items():
             err = np.linalg.norm(pts - truth, axis=-1) * 1000.0
             for key, _ in keys:
@@ -269,7 +271,8 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
     metrics = {
         "format": REPORT_FORMAT,
         "bundle": {"path": str(Path(bundle).resolve()), "name": bundle_obj.name, "sha256": bundle_obj.sha256,
-                   "files": dict(bundle_obj.manifest["files"]), "coarse_base": bundle_obj.coarse_base.value},
+                   "files": dict(bundle_obj.manifest["files"]), "coarse_base": bundle_obj.coarse_base.value,
+                   "heading": bundle_obj.heading.value},
         "data": {"path": str(Path(data_dir).resolve()), "manifest_sha256": data.manifest_sha256,
                  "same_as_training": trained_on == data.manifest_sha256, "max_frames": max_frames},
         "error": "Euclidean distance of each garment vertex to the simulated one, every frame [mm]; "
@@ -302,6 +305,8 @@ def _markdown(metrics: dict) -> str:
         f"{'the data set the bundle was trained on' if d['same_as_training'] else 'NOT the bundle training data set'})",
         f"- coarse model: displacement added to "
         f"{'the skinned garment' if b.get('coarse_base') == 'skinned' else 'the associated body vertices (I M_b)'}",
+        f"- heading: the models see the body "
+        f"{'turned to face +Z (canonical)' if b.get('heading') == 'canonical' else 'as it stands (world)'}",
         f"- error: {metrics['error']}",
         f"- histograms: {metrics['histogram_bin_mm']} mm bins (`histograms.png`, `histograms.npz`)",
     ]

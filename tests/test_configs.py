@@ -38,3 +38,24 @@ def test_training_configs_load(name):
     # train_coarse.json is METHOD.md's form; the shipped coarse model is train_coarse_skinned.json
     assert config.coarse_base.value == ("skinned" if name.startswith("coarse_skinned") else "body")
     assert config.coarse_target.value == ("taubin" if name in ("coarse_taubin", "coarse_skinned") else "stored")
+
+
+def test_the_shipped_bundle_configs_train_in_the_world_frame():
+    """tshirt-v3 was trained before the heading key; its configs keep reproducing it."""
+    pytest.importorskip("torch")
+    from cloth_usd.nn.train import load_train_config
+
+    for name in ("coarse", "coarse_taubin", "coarse_skinned", "coarse_skinned_laplacian"):
+        assert load_train_config(CONFIGS / f"train_{name}.json").heading.value == "world"
+
+
+def test_the_physics_configs_plan_and_load():
+    pytest.importorskip("torch")
+    from cloth_usd.nn.train import load_train_config
+
+    config = load_train_config(CONFIGS / "train_coarse_physics.json")
+    assert (config.objective.value, config.heading.value, config.coarse_base.value) == ("physics", "canonical",
+                                                                                         "skinned")
+    jobs = plan_jobs(load_config(CONFIGS / "physics_tshirt.json"))
+    splits = [j.meta["split"] for j in jobs]
+    assert splits.count("train") == 140 and len({j.meta["motion"] for j in jobs}) == 9  # 7 kinds + 2 test motions

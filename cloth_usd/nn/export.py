@@ -19,6 +19,7 @@ import numpy as np
 import torch
 
 from ..core.graph import build_graph
+from ..core.heading import Heading
 from ..core.pipeline import CoarseBase
 from ..runtime.io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT, detail_inputs
 from .models import ATTRIBUTE_FEATURES, CoarseGenerator, DetailGenerator
@@ -85,7 +86,8 @@ def export_detail(model: DetailGenerator, path: str | Path) -> Path:
 
 
 def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | None, clips, body,
-            frames: int, coarse_base: CoarseBase | str = CoarseBase.BODY) -> dict:
+            frames: int, coarse_base: CoarseBase | str = CoarseBase.BODY,
+            heading: Heading | str = Heading.WORLD) -> dict:
     """Largest point difference [m] between the torch models and their ONNX files, through
     the runtime's pipeline (:func:`cloth_usd.core.pipeline.run_tiers`), on ``clips``."""
     from ..core.pipeline import run_tiers
@@ -115,9 +117,9 @@ def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | N
             if tier == "detail" and t_detail is None:
                 continue
             want, _ = run_tiers(body, clip.pair, poses, transl, t_coarse, t_detail if tier == "detail" else None,
-                                coarse_base=coarse_base)
+                                coarse_base=coarse_base, heading=heading)
             got, _ = run_tiers(body, clip.pair, poses, transl, onnx_coarse,
-                               onnx_detail if tier == "detail" else None, coarse_base=coarse_base)
+                               onnx_detail if tier == "detail" else None, coarse_base=coarse_base, heading=heading)
             worst[tier] = max(worst[tier], float(np.abs(got - want).max()))
     return {"coarse_max_m": worst["coarse"], "detail_max_m": worst["detail"] if t_detail is not None else None,
             "sequences": len(clips), "frames": used}
@@ -137,7 +139,9 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
     Args:
         coarse_run, detail_run: training run folders (detail optional).
         data_dir: the data set both were trained on (its ``fit.npz`` ships in the bundle,
-            the sha256 of its ``manifest.json`` is recorded).
+            the sha256 of its ``manifest.json`` is recorded); for a physics-trained coarse run,
+            the data set config it was trained on (the run's own ``fit.npz`` ships, the
+            config's sha256 is recorded).
         out_dir: the bundle folder (see :func:`cloth_usd.runtime.bundle.write_bundle`).
         name, category: the bundle's name and garment category.
         metrics: evaluation metrics (``cloth-usd evaluate``'s ``metrics.json``) to record.
@@ -168,11 +172,23 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run")
     if detail is not None and detail.tier is not Tier.DETAIL:
         raise ArgumentError(f"--detail-run {detail_run}: is a {detail.tier.value} run")
-    data = load_dataset(data_dir, (Split.VAL,), body=body, max_frames=parity_frames)
+    if coarse.info["data"].get("kind") == "physics":  # trained on a data set config's planned sequences
+        from ..core.body import load_body_model
+        from .physics_train import PHYSICS_FIT, physics_set
+
+        if detail is not None:
+            raise ArgumentError(f"--detail-run {detail_run}: a physics-trained coarse run ships alone for now")
+        body = body if body is not None else load_body_model()
+        data = physics_set(data_dir, body, heading=coarse.config.heading, splits=(Split.VAL,),
+                           max_frames=parity_frames)
+        data_sha256, fit_npz = data.config_sha256, coarse.path / PHYSICS_FIT
+    else:
+        data = load_dataset(data_dir, (Split.VAL,), body=body, max_frames=parity_frames)
+        body, data_sha256, fit_npz = data.body, data.manifest_sha256, data_dir / FIT
     for run in (coarse, detail):
-        if run is not None and run.info["data"]["manifest_sha256"] != data.manifest_sha256:
-            raise ArgumentError(f"{run.path}: trained on another data set than {data_dir} (manifest sha256 "
-                                f"{run.info['data']['manifest_sha256'][:12]}... vs {data.manifest_sha256[:12]}...)")
+        if run is not None and run.info["data"]["manifest_sha256"] != data_sha256:
+            raise ArgumentError(f"{run.path}: trained on another data set than {data_dir} (sha256 "
+                                f"{run.info['data']['manifest_sha256'][:12]}... vs {data_sha256[:12]}...)")
     if detail is not None:
         used = (detail.info.get("coarse_run") or {}).get("best_sha256")
         if used != file_sha256(coarse.path / BEST):
@@ -201,7 +217,7 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         coarse_path = export_coarse(coarse.model, tmp / "coarse.onnx")
         detail_path = export_detail(detail.model, tmp / "detail.onnx") if detail is not None else None
         parity = _parity(coarse.model, detail.model if detail else None, coarse_path, detail_path, clips,
-                         data.body, parity_frames, coarse.config.coarse_base)
+                         body, parity_frames, coarse.config.coarse_base, coarse.config.heading)
         worst = max(v for v in (parity["coarse_max_m"], parity["detail_max_m"]) if v is not None)
         if not worst <= tolerance:
             raise ClothUsdError(f"export parity failed: ONNX and torch differ by {worst * 1000:.4f} mm on the "
@@ -214,12 +230,12 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         if metrics:
             summary["evaluation"] = _check_evaluated(metrics, coarse_path, detail_path, log)
         n_train = coarse.info["data"].get("train_sequences")
-        training = {"manifest_sha256": data.manifest_sha256,
+        training = {"manifest_sha256": data_sha256,
                     "description": description or f"{n_train} training sequences of {data_dir.name}"}
         out = write_bundle(out_dir, name=name, category=category, coarse_onnx=coarse_path,
-                           detail_onnx=detail_path, fit_npz=data_dir / FIT, configs=configs,
+                           detail_onnx=detail_path, fit_npz=fit_npz, configs=configs,
                            training_data=training, metrics=summary, opset=OPSET, force=force,
-                           coarse_base=coarse.config.coarse_base)
+                           coarse_base=coarse.config.coarse_base, heading=coarse.config.heading)
     load_bundle(out)
     return out
 

@@ -1,9 +1,9 @@
-"""Training of the coarse and detail generators (METHOD.md): seeded, resumable, logged.
+"""Training of the coarse and detail generators (docs/method.md): seeded, resumable, logged.
 
 ``cloth-usd train coarse|detail --data DATA --out RUN`` calls :func:`train`. Batches are
 frames of one sequence (they share one garment graph); inputs are built through
 :mod:`cloth_usd.core.pipeline`, the runtime's own feature path (see
-:mod:`cloth_usd.nn.data`). Loss: METHOD.md's MSE of the displacement, measured in units
+:mod:`cloth_usd.nn.data`). Loss: docs/method.md's MSE of the displacement, measured in units
 of the model's output scale (the per-axis RMS of the training targets), so both tiers'
 losses are O(1).
 
@@ -48,6 +48,7 @@ import torch
 from ..core.body import BodyModel
 from ..core.files import file_sha256, read_config
 from ..core.graph import MeshGraph
+from ..core.heading import Heading
 from ..core.pipeline import CoarseBase
 from ..errors import ArgumentError, ClothUsdError
 from ..runtime.io import COARSE_INPUTS, DETAIL_INPUTS, coarse_inputs, detail_inputs
@@ -63,10 +64,11 @@ from .data import (
     load_dataset,
     plan_batches,
     with_coarse_target,
+    with_heading,
 )
 from .models import CoarseConfig, CoarseGenerator, DetailConfig, DetailGenerator
 
-__all__ = ["Tier", "CoarseInput", "TrainConfig", "load_train_config", "resume_settings", "EpochRecord",
+__all__ = ["Tier", "Objective", "CoarseInput", "TrainConfig", "load_train_config", "resume_settings", "EpochRecord",
            "TrainResult", "train", "load_run", "Run", "torch_coarse_fn", "torch_detail_fn", "pick_device",
            "plot_history"]
 
@@ -87,6 +89,16 @@ class Tier(str, enum.Enum):
 
     COARSE = "coarse"
     DETAIL = "detail"
+
+
+class Objective(str, enum.Enum):
+    """What a generator is trained to minimise."""
+
+    SUPERVISED = "supervised"
+    """The distance to simulated ground truth (a ``cloth-usd datagen`` data set)."""
+    PHYSICS = "physics"
+    """Coarse only: the garment's own energy at the output, no simulation
+    (:mod:`cloth_usd.nn.physics_train`)."""
 
 
 class CoarseInput(str, enum.Enum):
@@ -133,15 +145,26 @@ class TrainConfig:
     prefetch: int = 2
     """Batches whose features are computed ahead in a worker thread (0: none)."""
     coarse_base: CoarseBase = CoarseBase.BODY
-    """Coarse only: the displacement is added to ``I M_b`` (METHOD.md) or to the ``skinned``
+    """Coarse only: the displacement is added to ``I M_b`` (docs/method.md) or to the ``skinned``
     garment (a detail run takes its coarse run's)."""
     coarse_target: CoarseTarget = CoarseTarget.STORED
-    """The coarse ground truth: the shards' Laplacian smoothing (METHOD.md) or ``taubin``
+    """The coarse ground truth: the shards' Laplacian smoothing (docs/method.md) or ``taubin``
     (re-derived without shrinkage); the coarse model's target, and the detail model's
     ``M_coarse`` when ``coarse_input`` is ``target``."""
+    objective: Objective = Objective.SUPERVISED
+    """Supervised on simulated data, or ``physics`` (coarse only; :mod:`cloth_usd.nn.physics_train`)."""
+    bending_scale: float = 1.0
+    """Physics objective only: multiplies the material's bending stiffness (a stiffer
+    bending makes the coarse tier drape without fine folds)."""
+    heading: Heading = Heading.CANONICAL
+    """Coarse only: the frame the models see the body in (a detail run takes its coarse
+    run's): ``canonical`` turns every frame's body to face +Z (the garment turned with it), so
+    the models give the same local garment whichever way a character faces; ``world`` is how
+    runs before this key were trained (their run.json reads as ``world``)."""
 
     def __post_init__(self) -> None:
-        for key, kind in (("coarse_input", CoarseInput), ("coarse_target", CoarseTarget), ("coarse_base", CoarseBase)):
+        for key, kind in (("coarse_input", CoarseInput), ("coarse_target", CoarseTarget), ("coarse_base", CoarseBase),
+                          ("heading", Heading), ("objective", Objective)):
             value = getattr(self, key)
             if value not in {k.value for k in kind}:  # str enums: a member equals its value
                 raise ArgumentError(f"TrainConfig: {key}={value!r} is not one of {', '.join(k.value for k in kind)}")
@@ -150,7 +173,7 @@ class TrainConfig:
                   "batch": self.batch >= 1, "width": self.width > 0, "grad_clip": self.grad_clip >= 0,
                   "stat_frames": self.stat_frames >= 1, "val_frames": self.val_frames >= 0,
                   "max_batches": self.max_batches >= 0, "max_frames": self.max_frames >= 0,
-                  "prefetch": self.prefetch >= 0}
+                  "prefetch": self.prefetch >= 0, "bending_scale": self.bending_scale > 0}
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
             raise ArgumentError(f"TrainConfig: out of range: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
@@ -315,6 +338,8 @@ def _read_run_json(run_dir: Path) -> dict:
         raise ArgumentError(f"{path}: unreadable ({exc})") from exc
     if info.get("format") != RUN_FORMAT:
         raise ArgumentError(f"{path}: run format {info.get('format')!r}, this cloth-usd reads {RUN_FORMAT}")
+    if isinstance(info.get("config"), dict):  # runs from before the heading key saw the world frame
+        info["config"].setdefault("heading", Heading.WORLD.value)
     return info
 
 
@@ -398,7 +423,9 @@ def _write_history(run_dir: Path, history: Sequence[EpochRecord]) -> None:
     _atomic_text(buf.getvalue(), run_dir / f"{HISTORY}.csv")
 
 
-def plot_history(history: Sequence[EpochRecord], path: str | Path, title: str = "") -> Path:
+def plot_history(history: Sequence[EpochRecord], path: str | Path, title: str = "", *,
+                 loss_label: str = "loss (MSE / output scale^2)", mm_label: str = "validation error [mm]",
+                 log_loss: bool = True) -> Path:
     """Training and validation loss (log scale) and the validation error [mm] per epoch, as a PNG."""
     import matplotlib
 
@@ -410,13 +437,14 @@ def plot_history(history: Sequence[EpochRecord], path: str | Path, title: str = 
     ax1, ax2 = fig.subplots(1, 2)
     ax1.plot(epochs, [r.train_loss for r in history], "o-", label="train", ms=3)
     ax1.plot(epochs, [r.val_loss for r in history], "s-", label="validation", ms=3)
-    ax1.set_yscale("log")
+    if log_loss:
+        ax1.set_yscale("log")
     ax1.set_xlabel("epoch")
-    ax1.set_ylabel("loss (MSE / output scale^2)")
+    ax1.set_ylabel(loss_label)
     ax1.legend()
     ax2.plot(epochs, [r.val_mm for r in history], "s-", color="C1", ms=3)
     ax2.set_xlabel("epoch")
-    ax2.set_ylabel("validation error [mm]")
+    ax2.set_ylabel(mm_label)
     if title:
         fig.suptitle(title)
     fig.tight_layout()
@@ -557,6 +585,10 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
             whose config or data differ.
     """
     tier = Tier(tier)
+    if config.objective is not Objective.SUPERVISED:
+        raise ArgumentError(f"train: objective {config.objective.value!r} trains on a data set config, not on "
+                            "simulated data (cloth_usd.nn.physics_train.train_physics; cloth-usd train coarse "
+                            "--objective physics --data CONFIG)")
     dev = pick_device(device)
     run_dir = Path(run_dir)
     if not resume and (run_dir / CHECKPOINT).exists():
@@ -573,7 +605,8 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
         raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run, not a coarse one")
     data = dataset if dataset is not None else load_dataset(
         data_dir, (Split.TRAIN, Split.VAL), body=body, max_frames=config.max_frames or None)
-    data = with_coarse_target(data, config.coarse_target)
+    heading = coarse.config.heading if coarse is not None else config.heading
+    data = with_heading(with_coarse_target(data, config.coarse_target), heading)
     train_clips, val_clips = data.split(Split.TRAIN), data.split(Split.VAL)
     if not train_clips:
         raise ArgumentError(f"--data {data_dir}: no accepted training sequences")

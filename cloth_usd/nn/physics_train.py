@@ -1,0 +1,287 @@
+"""Training the coarse generator on the garment's own physics: no simulated data.
+
+The objective is the garment's energy (:mod:`cloth_usd.nn.physics`) at the model's
+output, quasi-static: membrane strain against the rest garment, bending against its
+rest angles, gravity, and a one-sided contact penalty against the posed body (each
+garment vertex against the tangent plane of its associated body vertex, the point and
+normal the features and the post-process use). Minimising it per frame asks for the
+garment at rest in that pose, which is what a per-frame model can learn (SNUG, PBNS).
+
+The poses, bodies and garments are a data set config's (:class:`~cloth_usd.datagen.factory.
+FactoryConfig`, the file ``cloth-usd datagen`` reads): the same garment-body pairs, motions
+and splits, planned but never simulated. The fit attribute's factor analysis is fitted on
+its training pairs, as the factory does, and saved in the run folder.
+
+The coarse model is made smooth by a stiffer bending (``TrainConfig.bending_scale``):
+the coarse tier should drape, not wrinkle; the detail tier's physics objective (the
+material as it is) is still to come. The run folder has the supervised runs' layout
+(``run.json``, ``best.pt``, ``history.csv``, ``curve.png``), so ``load_run`` reads it; its
+losses are energies [J], relative to the skinned garment's (below 0: the model found a
+state of lower energy than skinning). Shape letters: B frames, N garment vertices.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+import torch
+
+from ..core.body import BodyModel, load_body_model
+from ..core.fit import FitModel
+from ..core.heading import Heading, heading_frame
+from ..core.pipeline import CoarseBase, GarmentPair, coarse_base_points, coarse_model_features, pose_body, prepare_pair
+from ..errors import ArgumentError, ClothUsdError
+from .data import Moments, Split, plan_batches
+from .physics import GarmentRest, Material, garment_energy, garment_rest
+from .train import (BEST, CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, Tier, TrainConfig, TrainResult,
+                    _atomic_save, _atomic_text, _coarse_forward, _rng_state, _Tensors, _write_history, build_model,
+                    plot_history)
+
+__all__ = ["PhysicsClip", "PhysicsSet", "physics_set", "train_physics", "PHYSICS_FIT", "OUTPUT_SCALE"]
+
+log = logging.getLogger(__name__)
+
+#: The fit model of a physics run's pairs, in its run folder.
+PHYSICS_FIT = "fit.npz"
+#: The coarse model's output scale [m] per axis under the physics objective (no target
+#: to measure it on): the order of a T-shirt's departure from skinning.
+OUTPUT_SCALE = 0.02
+#: A fresh model's last layer is multiplied by this (see :func:`_statistics`).
+START_SHRINK = 0.05
+
+
+@dataclass(frozen=True, eq=False)
+class PhysicsClip:
+    """One planned garment-body-motion sequence, in the frame the models see."""
+
+    name: str
+    split: Split
+    pair: GarmentPair
+    """Association, graph and fit attribute, as the runtime computes them."""
+    rest: GarmentRest
+    """The rest garment's metric, masses and bending rest state."""
+    rest_points: np.ndarray
+    """(N, 3) float64 rest garment [m], canonical body frame."""
+    poses: np.ndarray
+    """(T, 72) float64 axis-angle [rad], heading taken out when the run is canonical."""
+    transl: np.ndarray
+    """(T, 3) float64 root translation [m]."""
+    meta: dict
+
+    @property
+    def num_frames(self) -> int:
+        """T."""
+        return int(self.poses.shape[0])
+
+
+@dataclass(frozen=True)
+class PhysicsSet:
+    """The pairs and motions of a data set config, planned and prepared."""
+
+    config_sha256: str
+    """sha256 of the config file's bytes (recorded with the run)."""
+    fit: FitModel
+    material: Material
+    clips: tuple[PhysicsClip, ...]
+
+    def split(self, split: Split | str) -> list[PhysicsClip]:
+        split = Split(split)
+        return [c for c in self.clips if c.split is split]
+
+
+def physics_set(config_path: str | Path, body: BodyModel | None = None, *, heading: Heading | str = Heading.CANONICAL,
+                splits: Sequence[Split | str] | None = None, max_frames: int | None = None,
+                bending_scale: float = 1.0) -> PhysicsSet:
+    """Plan a data set config's sequences (no simulation) for the physics objective.
+
+    Args:
+        config_path: a ``cloth-usd datagen`` config (.json / .toml).
+        body: the body model (the embedded one when None).
+        heading: the frame the models see (:class:`~cloth_usd.core.heading.Heading`).
+        splits: the splits to keep (all when None).
+        max_frames: cut every sequence to its first frames.
+        bending_scale: multiplies the material's bending stiffness.
+    """
+    from ..core.files import file_sha256
+    from ..datagen.factory import fit_training_pairs, load_config, plan_jobs
+    from ..datagen.simulate import SimConfig
+
+    config_path = Path(config_path)
+    body = body if body is not None else load_body_model()
+    factory = load_config(config_path)
+    jobs = plan_jobs(factory, body)
+    fit, _ = fit_training_pairs(jobs, body)
+    base = Material.from_sim_config(SimConfig(**factory.sim))
+    material = dataclasses.replace(base, bend_stiffness=base.bend_stiffness * bending_scale)
+    keep = None if splits is None else {Split(s) for s in splits}
+    pairs: dict[str, tuple[GarmentPair, GarmentRest]] = {}
+    clips = []
+    for job in jobs:
+        split = Split(job.meta["split"])
+        if keep is not None and split not in keep:
+            continue
+        key = f"shirt{job.meta['shirt']}.{job.meta['body']}"
+        if key not in pairs:
+            pair = prepare_pair(body, job.betas, job.garment_vertices, job.garment_faces, fit)
+            pairs[key] = pair, garment_rest(job.garment_vertices, job.garment_faces, material)
+        pair, rest = pairs[key]
+        poses, transl = job.poses[:max_frames], job.transl[:max_frames]
+        if Heading(heading) is Heading.CANONICAL:
+            poses = heading_frame(poses, transl, pair.joints[0]).canonical_poses(poses)
+        clips.append(PhysicsClip(name=job.name, split=split, pair=pair, rest=rest,
+                                 rest_points=np.asarray(job.garment_vertices, dtype=np.float64),
+                                 poses=np.asarray(poses, dtype=np.float64),
+                                 transl=np.asarray(transl, dtype=np.float64), meta=dict(job.meta)))
+    return PhysicsSet(config_sha256=file_sha256(config_path), fit=fit, material=material, clips=tuple(clips))
+
+
+def _frames(body: BodyModel, clip: PhysicsClip, frames: np.ndarray, base: CoarseBase):
+    """Coarse features, the coarse base and the contact planes of ``frames`` of ``clip``."""
+    poses, transl = clip.poses[frames], clip.transl[frames]
+    posed = pose_body(body, clip.pair, poses, transl)
+    feats = coarse_model_features(clip.pair, posed, transl)
+    points = coarse_base_points(body, clip.pair, posed, poses, transl, base)
+    return feats, points, posed.garment_points, posed.garment_normals
+
+
+def _energy(clip: PhysicsClip, x: torch.Tensor, body_points: np.ndarray, body_normals: np.ndarray,
+            material: Material) -> torch.Tensor:
+    """(B,) the quasi-static energy [J] of garments ``x`` (B, N, 3)."""
+    return garment_energy(x, clip.rest, material, body_points=torch.from_numpy(body_points).to(x),
+                          body_normals=torch.from_numpy(body_normals).to(x)).total
+
+
+def _statistics(model, body: BodyModel, clips: Sequence[PhysicsClip], config: TrainConfig, base: CoarseBase) -> None:
+    """Input statistics from the training frames, the fixed :data:`OUTPUT_SCALE`, and a start
+    near the base: the last layers are shrunk so a fresh model moves the garment by about a
+    millimetre, not by :data:`OUTPUT_SCALE` in random directions (which tears the membrane:
+    hundreds of J against the skinned garment's few, a hole the optimiser climbs out of slowly)."""
+    feats = Moments(7)
+    for k, frames in plan_batches(clips, config.batch, frames=config.stat_frames):
+        feats.add(_frames(body, clips[k], frames, base)[0])
+    model.set_statistics(torch.from_numpy(feats.mean), torch.from_numpy(feats.std),
+                         torch.full((3,), OUTPUT_SCALE))
+    head = model.head.magnitude if model.head.magnitude is not None else model.head.direction
+    with torch.no_grad():
+        head[-1].weight.mul_(START_SHRINK)
+        head[-1].bias.mul_(START_SHRINK)
+
+
+def _validate(model, tensors: _Tensors, body: BodyModel, clips: Sequence[PhysicsClip], config: TrainConfig,
+              material: Material, base: CoarseBase) -> tuple[float, float]:
+    """(mean energy relative to the skinned garment's [J], mean distance from skinning [mm])."""
+    if not clips:
+        return math.nan, math.nan
+    model.eval()
+    rel = dist = 0.0
+    count = vertices = 0
+    with torch.no_grad():
+        for k, frames in plan_batches(clips, config.batch, frames=config.val_frames or None):
+            clip = clips[k]
+            feats, points, bp, bn = _frames(body, clip, frames, base)
+            delta = _coarse_forward(model, feats, clip.pair.graph, tensors).double()
+            skinned = torch.from_numpy(points)
+            e = _energy(clip, skinned + delta, bp, bn, material) - _energy(clip, skinned, bp, bn, material)
+            rel += float(e.sum())
+            dist += float(torch.linalg.vector_norm(delta, dim=-1).sum())
+            count += len(frames)
+            vertices += delta.shape[0] * delta.shape[1]
+    return rel / count, dist / vertices * 1000.0
+
+
+def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainConfig = TrainConfig(
+        objective=Objective.PHYSICS, coarse_base=CoarseBase.SKINNED), *, device: str | None = "auto",
+        body: BodyModel | None = None, progress: Callable[[EpochRecord], None] | None = None) -> TrainResult:
+    """Train a coarse generator on the physics objective (see the module docstring).
+
+    Args:
+        config_path: the data set config whose pairs and motions it trains on.
+        run_dir: the run folder to create.
+        config: ``objective`` must be ``physics``; ``bending_scale`` stiffens the bending.
+        device: torch device (auto: CUDA when available).
+        progress: called after every epoch.
+    Raises:
+        ArgumentError: a run exists in ``run_dir``, or the config has no training pairs.
+    """
+    from .train import pick_device
+
+    if config.objective is not Objective.PHYSICS:
+        raise ArgumentError(f"train_physics: config.objective is {config.objective.value!r}, not 'physics'")
+    run_dir = Path(run_dir)
+    if (run_dir / CHECKPOINT).exists():
+        raise ArgumentError(f"--out {run_dir}: a run exists there; pick a new folder")
+    dev = pick_device(device)
+    body = body if body is not None else load_body_model()
+    data = physics_set(config_path, body, heading=config.heading, splits=(Split.TRAIN, Split.VAL),
+                       max_frames=config.max_frames or None, bending_scale=config.bending_scale)
+    train_clips, val_clips = data.split(Split.TRAIN), data.split(Split.VAL)
+    if not train_clips:
+        raise ArgumentError(f"{config_path}: no training sequences")
+    base = config.coarse_base
+    torch.manual_seed(config.seed)
+    model = build_model(Tier.COARSE, config).to(dev)
+    _statistics(model, body, train_clips, config, base)
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
+    tensors = _Tensors(dev)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    data.fit.save(run_dir / PHYSICS_FIT)
+    info = {"format": RUN_FORMAT, "tier": Tier.COARSE.value, "config": config.to_json(),
+            "model_config": dataclasses.asdict(model.config),
+            "data": {"path": str(Path(config_path).resolve()), "manifest_sha256": data.config_sha256,
+                     "train_sequences": len(train_clips), "val_sequences": len(val_clips), "kind": "physics"},
+            "physics": {"material": dataclasses.asdict(data.material), "fit": PHYSICS_FIT},
+            "coarse_run": None, "body_model_sha256": body.sha256, "torch": torch.__version__}
+    _atomic_text(json.dumps(info, indent=2, sort_keys=True) + "\n", run_dir / RUN)
+    history: list[EpochRecord] = []
+    best_loss, best_epoch = math.inf, -1
+    for epoch in range(config.epochs):
+        began = time.perf_counter()
+        lr = config.lr * config.lr_decay ** epoch
+        for group in optimizer.param_groups:
+            group["lr"] = lr
+        batches = plan_batches(train_clips, config.batch, np.random.default_rng([config.seed, epoch]))
+        if config.max_batches:
+            batches = batches[:config.max_batches]
+        model.train()
+        total = 0.0
+        for k, frames in batches:
+            clip = train_clips[k]
+            feats, points, bp, bn = _frames(body, clip, frames, base)
+            x = torch.from_numpy(points).to(dev) + _coarse_forward(model, feats, clip.pair.graph, tensors).double()
+            loss = _energy(clip, x, bp, bn, data.material).mean()
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            if config.grad_clip:
+                torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
+            optimizer.step()
+            total += float(loss.detach())
+        val_loss, val_mm = _validate(model, tensors, body, val_clips, config, data.material, base)
+        record = EpochRecord(epoch=epoch, train_loss=total / max(len(batches), 1), val_loss=val_loss, val_mm=val_mm,
+                             lr=lr, seconds=time.perf_counter() - began)
+        history.append(record)
+        score = val_loss if not math.isnan(val_loss) else record.train_loss
+        if score <= best_loss or best_epoch < 0:
+            best_loss, best_epoch = score, epoch
+            _atomic_save({"epoch": epoch, "model": model.state_dict(), "val_loss": val_loss}, run_dir / BEST)
+        _atomic_save({"epoch": epoch, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                      "rng": _rng_state(), "history": [dataclasses.asdict(r) for r in history],
+                      "best_loss": best_loss, "best_epoch": best_epoch}, run_dir / CHECKPOINT)
+        _write_history(run_dir, history)
+        plot_history(history, run_dir / CURVE, title=f"coarse (physics): {run_dir.name}", loss_label=
+                     "energy [J] (validation: relative to skinning)", mm_label="validation: distance from skinning [mm]",
+                     log_loss=False)
+        log.info("physics epoch %d: train %.4g J, val %+.4g J vs skinning (%.1f mm from it), %.1f s", epoch,
+                 record.train_loss, val_loss, val_mm, record.seconds)
+        if progress is not None:
+            progress(record)
+    if not history:
+        raise ClothUsdError(f"{run_dir}: no epoch was trained")
+    return TrainResult(run_dir=run_dir, history=tuple(history), best_epoch=best_epoch, model=model.eval())

@@ -1,0 +1,111 @@
+"""The coarse generator trained on the garment's physics: planned sequences, lower energy, runs, export."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+torch = pytest.importorskip("torch", reason="training needs torch (pip install 'cloth-usd[train]')")
+
+from train_data import TINY  # noqa: E402
+
+from cloth_usd.core.heading import Heading, root_yaw  # noqa: E402
+from cloth_usd.core.pipeline import CoarseBase  # noqa: E402
+from cloth_usd.errors import ArgumentError  # noqa: E402
+from cloth_usd.nn.data import Split  # noqa: E402
+from cloth_usd.nn.physics_train import _energy, _frames, _statistics, physics_set, train_physics  # noqa: E402
+from cloth_usd.nn.train import Objective, Tier, TrainConfig, _coarse_forward, _Tensors, build_model, load_run  # noqa: E402
+
+pytestmark = pytest.mark.slow
+PHYSICS = TrainConfig(objective="physics", coarse_base="skinned", width=0.0625, epochs=2, batch=3, max_batches=2,
+                      stat_frames=3, bending_scale=10.0, lr=2e-3)
+
+
+@pytest.fixture(autouse=True)
+def one_thread():
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.fixture(scope="module")
+def config_path(tmp_path_factory):
+    path = tmp_path_factory.mktemp("physics") / "tiny.json"
+    path.write_text(json.dumps({**TINY, "garment_vertices": 300, "max_frames": 4}))
+    return path
+
+
+@pytest.fixture(scope="module")
+def planned(config_path):
+    return physics_set(config_path, splits=(Split.TRAIN, Split.VAL), bending_scale=10.0)
+
+
+def test_the_config_is_planned_not_simulated_with_the_heading_taken_out(planned, config_path):
+    assert {c.split for c in planned.clips} == {Split.TRAIN, Split.VAL}
+    assert all(c.num_frames == 4 and c.rest.positions.shape[0] == c.pair.num_vertices for c in planned.clips)
+    np.testing.assert_allclose(root_yaw(np.concatenate([c.poses for c in planned.clips])), 0.0, atol=1e-12)
+    world = physics_set(config_path, heading=Heading.WORLD, splits=(Split.TRAIN,))
+    for w, c in zip(world.clips, planned.split(Split.TRAIN)):
+        np.testing.assert_allclose(c.poses[:, 3:], w.poses[:, 3:])  # only the root loses its heading
+    assert planned.material.bend_stiffness == pytest.approx(10.0 * world.material.bend_stiffness)
+
+
+def test_training_finds_a_garment_of_lower_energy_than_skinning(planned):
+    """Overfitting one batch: the model's garment ends below the skinned garment's energy."""
+    clip = planned.split(Split.TRAIN)[0]
+    frames = np.arange(clip.num_frames)
+    feats, skinned, bp, bn = _frames(_body(), clip, frames, CoarseBase.SKINNED)
+    torch.manual_seed(0)
+    model = build_model(Tier.COARSE, PHYSICS)
+    _statistics(model, _body(), [clip], PHYSICS, CoarseBase.SKINNED)
+    tensors, opt = _Tensors(torch.device("cpu")), torch.optim.Adam(model.parameters(), lr=2e-3)
+    base = torch.from_numpy(skinned)
+    e_skinned = float(_energy(clip, base, bp, bn, planned.material).mean())
+
+    def energy():
+        return _energy(clip, base + _coarse_forward(model, feats, clip.pair.graph, tensors).double(), bp, bn,
+                       planned.material).mean()
+
+    first = float(energy().detach())
+    for _ in range(60):
+        loss = energy()
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+    last = float(energy().detach())
+    assert last < first and last < e_skinned, (first, last, e_skinned)
+
+
+def test_a_physics_run_loads_and_exports_a_bundle_that_bakes(config_path, tmp_path):
+    from cloth_usd.nn.export import export_bundle
+    from cloth_usd.runtime.bundle import load_bundle
+
+    result = train_physics(config_path, tmp_path / "run", PHYSICS, device="cpu")
+    assert len(result.history) == 2 and all(np.isfinite(r.train_loss) and np.isfinite(r.val_loss)
+                                            for r in result.history)
+    for name in ("run.json", "best.pt", "checkpoint.pt", "history.csv", "curve.png", "fit.npz"):
+        assert (tmp_path / "run" / name).is_file(), name
+    run = load_run(tmp_path / "run")
+    assert run.config.objective is Objective.PHYSICS and run.info["data"]["kind"] == "physics"
+    out = export_bundle(tmp_path / "run", None, config_path, tmp_path / "bundle", name="physics-test")
+    bundle = load_bundle(out)
+    assert bundle.heading is Heading.CANONICAL and bundle.coarse_base is CoarseBase.SKINNED
+    assert bundle.manifest["metrics"]["export_parity"]["coarse_max_m"] < 1e-4
+    with pytest.raises(ArgumentError, match="a run exists there"):
+        train_physics(config_path, tmp_path / "run", PHYSICS, device="cpu")
+
+
+def test_the_supervised_trainer_refuses_the_physics_objective(tmp_path):
+    from cloth_usd.nn.train import train
+
+    with pytest.raises(ArgumentError, match="objective 'physics' trains on a data set config"):
+        train("coarse", tmp_path, tmp_path / "run", PHYSICS, device="cpu")
+
+
+def _body():
+    from cloth_usd.core.body import load_body_model
+
+    return load_body_model()
