@@ -27,7 +27,7 @@ class BodyModelError(ClothUsdError):
 
 
 class SceneError(ClothUsdError):
-    """A stage breaks the scene contract (../shared/SCENE.md)."""
+    """A stage breaks the scene contract (see docs/scene_contract.md in the repository)."""
 
 
 class GarmentError(SceneError):

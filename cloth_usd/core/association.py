@@ -1,6 +1,6 @@
 """Garment-body association: each garment vertex's nearest place on the unposed body.
 
-METHOD.md's indicator matrix ``I`` (one body vertex per garment vertex) and the skinning
+docs/method.md's indicator matrix ``I`` (one body vertex per garment vertex) and the skinning
 tier's surface binding (triangle + barycentric coordinates) come from one query, stored
 once per garment-body pair. Shape letters: N garment vertices, V body vertices, F body
 triangles.
@@ -25,7 +25,7 @@ class Association:
     barycentric: np.ndarray
     """(N, 3) float64 barycentric coordinates of the nearest surface point in it."""
     vertex: np.ndarray
-    """(N,) int64 nearest body vertex (METHOD.md's indicator ``I``)."""
+    """(N,) int64 nearest body vertex (docs/method.md's indicator ``I``)."""
     distance: np.ndarray
     """(N,) float64 distance [m] from the garment vertex to the body surface."""
 

@@ -1,4 +1,4 @@
-"""Node features of the learned tiers (METHOD.md), numpy only.
+"""Node features of the learned tiers (docs/method.md), numpy only.
 
 The coarse model reads, per garment vertex, its associated posed body vertex: normal,
 position with the root translation removed, and the fit attribute a1. The detail model
@@ -76,7 +76,7 @@ def coarse_features(posed_body: np.ndarray, body_normals: np.ndarray, assoc_vert
     Args:
         posed_body: (T, V, 3) posed body vertices [m], world frame (``transl`` included).
         body_normals: (T, V, 3) their unit normals.
-        assoc_vertex: (N,) int associated body vertex of each garment vertex (METHOD.md's I).
+        assoc_vertex: (N,) int associated body vertex of each garment vertex (docs/method.md's I).
         transl: (T, 3) root translation [m] (SMPL ``transl``), removed from positions.
         a1: the first fit factor of the garment-body pair.
     Returns:

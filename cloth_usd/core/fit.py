@@ -1,4 +1,4 @@
-"""The fit attribute alpha: factor analysis over garment-body distances (METHOD.md).
+"""The fit attribute alpha: factor analysis over garment-body distances (docs/method.md).
 
 For each garment-body pair, D holds the distance of N_g* garment vertices to their
 associated unposed body vertices; factor analysis ``D - mu ~= L A`` gives each pair its
@@ -110,7 +110,7 @@ def pair_distances(garment_points: np.ndarray, association: Association, body_ve
 
     Args:
         garment_points: (N, 3) rest garment [m], canonical body frame.
-        association: the pair's association (``vertex`` is METHOD.md's ``I``).
+        association: the pair's association (``vertex`` is docs/method.md's ``I``).
         body_vertices: (V, 3) the pair's unposed body [m].
         anchors: (G,) body vertex indices.
     Returns:

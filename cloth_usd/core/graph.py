@@ -3,12 +3,12 @@
 The graph networks (``cloth_usd.nn``) never see an edge list at inference time: they
 gather neighbour features through a padded neighbour table ``nbr`` with a validity
 ``mask``, so the exported ONNX model has no scatter op and stays topology-agnostic
-(METHOD.md "Our choice" for pooling: clusters are precomputed here per garment and
+(docs/method.md "Our choice" for pooling: clusters are precomputed here per garment and
 passed to the model as index tensors).
 
 Shape letters (this module, as issue #4 names them): N vertices, M triangles, E directed
 edges, K neighbours per vertex (table width), N2 pooled clusters, P members per cluster
-(table width), K2 neighbours per cluster. Note STYLE.md uses K for pooled clusters in
+(table width), K2 neighbours per cluster. Note the project's shape letters use K for pooled clusters in
 general; the graph code follows the issue's letters because K is the table width here.
 
 Padding convention: a padded slot of ``nbr`` holds the row's own index (so every gather

@@ -1,4 +1,4 @@
-"""METHOD.md's post-process: push garment vertices out of the body.
+"""docs/method.md's post-process: push garment vertices out of the body.
 
 A garment vertex that penetrates the body, or sits closer than ``margin`` to it, is moved
 out along the normal of its associated body vertex until it is ``margin`` in front of

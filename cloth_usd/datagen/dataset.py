@@ -1,7 +1,7 @@
 """Sharded, resumable ground-truth data: one ``.npz`` shard per garment-body-motion.
 
 A shard holds the garment (rest vertices, faces), the body (betas) and motion (poses,
-transl), the simulated positions, METHOD.md's coarse target (Laplacian smoothing of
+transl), the simulated positions, docs/method.md's coarse target (Laplacian smoothing of
 the simulated garment), the fit-attribute inputs (each garment vertex's associated
 unposed body vertex and its distance to it) and the quality figures. A JSON
 :class:`Manifest` beside the shards records seeds, engine versions, the
@@ -124,7 +124,7 @@ class Shard:
     transl: np.ndarray
     """(T, 3) float64 [m]."""
     assoc_vertex: np.ndarray
-    """(N,) int64 associated body vertex (nearest vertex of the unposed body, METHOD.md's I)."""
+    """(N,) int64 associated body vertex (nearest vertex of the unposed body, docs/method.md's I)."""
     fit_distance: np.ndarray
     """(N,) float32 distance [m] from each rest garment vertex to its associated body vertex."""
     surface_distance: np.ndarray
@@ -180,7 +180,7 @@ def laplacian_smooth(positions: np.ndarray, faces: np.ndarray, *, iterations: in
 
 def fit_inputs(body: BodyModel, betas: np.ndarray, garment_vertices: np.ndarray
                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The fit-attribute inputs of one garment-body pair (METHOD.md, rest pose).
+    """The fit-attribute inputs of one garment-body pair (docs/method.md, rest pose).
 
     Returns:
         ``(assoc_vertex (N,) int64, fit_distance (N,) [m] to that body vertex,

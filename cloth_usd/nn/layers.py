@@ -70,7 +70,7 @@ def masked_softmax(scores: torch.Tensor, mask: torch.Tensor, dim: int) -> torch.
 
 
 class GATBlock(nn.Module):
-    """Graph attention (Velickovic et al. 2017) with a self-reinforced stream (METHOD.md).
+    """Graph attention (Velickovic et al. 2017) with a self-reinforced stream (docs/method.md).
 
     Output = concat(self stream ``W_s x_i`` (S), attention aggregation over the mesh
     neighbours j of i, per head h: ``sum_j softmax_j(LeakyReLU(a_dst.h_i + a_src.h_j)) h_j``

@@ -1,6 +1,6 @@
 """The learned tiers' networks: coarse generator, attribute parser, detail generator.
 
-Widths default to the paper's (METHOD.md); ``width`` scales every hidden width for
+Widths default to the paper's (docs/method.md); ``width`` scales every hidden width for
 faster tiers. Normalisation statistics (input mean/std, output scale) are buffers, so
 they ship inside the saved and exported model.
 
@@ -47,7 +47,7 @@ COARSE_FEATURES = 7
 DETAIL_FEATURES = 30
 #: Parser input: fit alpha (3) + SMPL beta (10) + pose theta (72).
 ATTRIBUTE_FEATURES = 85
-#: The guard of the direction normalisation d / max(|d|, EPS) (METHOD.md).
+#: The guard of the direction normalisation d / max(|d|, EPS) (docs/method.md).
 DIRECTION_EPS = 1e-6
 #: Heads of every GAT block.
 HEADS = 4

@@ -1,4 +1,4 @@
-"""Writing the point-cache layer and the shot layer (SCENE.md, "The output").
+"""Writing the point-cache layer and the shot layer (docs/scene_contract.md, "The output").
 
 The cache layer holds only ``over`` specs at garment prim paths with time-sampled
 ``points`` and ``extent``. Layers are written to a temporary file beside the target and
