@@ -539,7 +539,8 @@ def _bake_garment(stage, writer, garment: Garment, char: Character, body: BodyMo
             skinned = skin_garment(binding, poses[lo:hi], transl[lo:hi], body.parents)
             pts = skinned
             if learned is not None:
-                frames = learned.evaluate(tier, poses[lo:hi], transl[lo:hi], batch_size=batch_size)
+                frames = learned.evaluate(tier, poses[lo:hi], transl[lo:hi], batch_size=batch_size,
+                                          skinned=skinned)
                 pts, used = _guarded(learned, tier, frames.points, skinned, poses[lo:hi], transl[lo:hi], edges,
                                      guard, batch_size)
                 for i, (replaced_by, why) in used.items():
@@ -602,7 +603,8 @@ def _guarded(learned, tier: Tier, points: np.ndarray, skinned: np.ndarray, poses
     bad = np.flatnonzero(~faults.ok)
     used: dict[int, tuple[Tier, str]] = {}
     if bad.size and tier is Tier.DETAIL:
-        coarse = learned.evaluate(Tier.COARSE, poses[bad], transl[bad], batch_size=batch_size).points
+        coarse = learned.evaluate(Tier.COARSE, poses[bad], transl[bad], batch_size=batch_size,
+                                  skinned=skinned[bad]).points
         ok = check_frames(coarse, skinned[bad], rest, edges, limits).ok
         out[bad[ok]] = coarse[ok]
         used.update((int(i), (Tier.COARSE, faults.reasons[i])) for i in bad[ok])

@@ -45,7 +45,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 from .core.files import read_config
-from .errors import ArgumentError, ClothUsdError
+from .errors import ArgumentError, ClothUsdError, OutputWriteError
 
 __all__ = ["Job", "JobStatus", "JobReport", "BatchReport", "load_jobs", "run_batch", "describe_jobs", "EXECUTORS",
            "KILL_HOOK_ENV"]
@@ -399,6 +399,8 @@ def _run_task(task: _Task) -> dict:
                    "inputs_sha256": result.inputs_sha256,
                    "garments": [_garment_summary(g) for g in result.garments],
                    "warnings": [w for g in result.garments for w in g.warnings]}
+    except OutputWriteError as exc:  # USD could not save: a full disk, a share gone; worth another attempt
+        out = {"status": "error", "error": _one_line(str(exc)), "retry": True}
     except ClothUsdError as exc:
         out = {"status": "error", "error": _one_line(str(exc)), "retry": False}
     except OSError as exc:  # a full disk, a network share gone: worth another attempt

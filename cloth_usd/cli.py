@@ -19,17 +19,27 @@ _JOINT_MAP_HELP = ("JSON object (or .toml table) {\"their joint name\": \"SMPL j
                    "named in no known convention (smpl, smplx, smpl-fbx, meshcapade, phc)")
 
 
+_VERBOSE_HELP = "debug logging and tracebacks on error"
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="cloth-usd", description="Learned garment animation for USD shots.")
     p.add_argument("--version", action="version", version=f"cloth-usd {__version__}")
-    p.add_argument("-v", "--verbose", action="store_true", help="debug logging and tracebacks on error")
+    p.add_argument("-v", "--verbose", action="store_true", help=_VERBOSE_HELP)
     sub = p.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    # -v also after the command (`cloth-usd bake X -o Y -v`). SUPPRESS: a subcommand that is
+    # not given -v sets nothing, so it never overwrites the top-level one's True.
+    verbose = argparse.ArgumentParser(add_help=False)
+    verbose.add_argument("-v", "--verbose", action="store_true", default=argparse.SUPPRESS, help=_VERBOSE_HELP)
 
-    i = sub.add_parser("inspect", help="list characters, garments, frame range, units and problems")
+    def add_command(name: str, **kwargs) -> argparse.ArgumentParser:
+        return sub.add_parser(name, parents=[verbose], **kwargs)
+
+    i = add_command("inspect", help="list characters, garments, frame range, units and problems")
     i.add_argument("scene", help="USD stage to read")
     i.add_argument("--joint-map", metavar="FILE", help=_JOINT_MAP_HELP)
 
-    b = sub.add_parser("bake", help="write a garment point-cache layer")
+    b = add_command("bake", help="write a garment point-cache layer")
     b.add_argument("scene", help="USD stage to read (never modified)")
     b.add_argument("-o", "--output", required=True, help="cache layer to write (.usdc, .usda)")
     b.add_argument("--shot", help="also write a shot layer that sublayers [cache, scene]")
@@ -47,15 +57,15 @@ def _parser() -> argparse.ArgumentParser:
                    help="a learned frame that is not a garment (NaN, torn, far from the body) is an error "
                         "(exit 2, nothing written) instead of being replaced by the next safer tier")
 
-    d = sub.add_parser("doctor", help="check the body model file(s) and the runtime")
+    d = add_command("doctor", help="check the body model file(s) and the runtime")
     d.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
     d.add_argument("--gender", default="neutral", help="file to pick inside a folder: neutral, female, male")
-    g = sub.add_parser("datagen", help="simulate a ground-truth data set from a config (Newton)")
+    g = add_command("datagen", help="simulate a ground-truth data set from a config (Newton)")
     g.add_argument("config", help="data set config (.json or .toml; see cloth_usd.datagen.factory)")
     g.add_argument("-o", "--output", required=True, help="folder for shards, manifest.json and fit.npz")
     g.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
 
-    bt = sub.add_parser("batch", help="bake many jobs (a job file, stage list or globs) in workers or on Ray")
+    bt = add_command("batch", help="bake many jobs (a job file, stage list or globs) in workers or on Ray")
     bt.add_argument("jobs", nargs="+", metavar="JOBS",
                     help="JOBS.toml / JOBS.json (a list of jobs), STAGES.txt (one stage a line), stages or globs")
     bt.add_argument("--out-dir", help="folder for outputs a job does not name (default: beside each stage)")
@@ -77,7 +87,7 @@ def _parser() -> argparse.ArgumentParser:
     bt.add_argument("--dry-run", action="store_true",
                     help="list each job's `cloth-usd bake` command (for a farm scheduler); bake nothing")
 
-    r = sub.add_parser("render", help="draw body and garments at some frames to a PNG (a preview)")
+    r = add_command("render", help="draw body and garments at some frames to a PNG (a preview)")
     r.add_argument("scene", help="USD stage or shot layer to read, or a data set shard (.npz)")
     r.add_argument("-o", "--output", required=True, help="PNG to write")
     r.add_argument("--frames", required=True,
@@ -85,7 +95,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--view", default="three-quarter", help="front, side or three-quarter")
     r.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
 
-    tr = sub.add_parser("train", help="train the coarse or detail generator on a datagen data set, or the "
+    tr = add_command("train", help="train the coarse or detail generator on a datagen data set, or the "
                                       "coarse one on the garment's physics")
     tr.add_argument("tier", choices=["coarse", "detail"], help="which generator")
     tr.add_argument("--data", required=True,
@@ -103,7 +113,7 @@ def _parser() -> argparse.ArgumentParser:
     tr.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
     tr.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
 
-    ex = sub.add_parser("export", help="export trained runs to ONNX and write a verified model bundle")
+    ex = add_command("export", help="export trained runs to ONNX and write a verified model bundle")
     ex.add_argument("--coarse-run", required=True, help="trained coarse run folder")
     ex.add_argument("--detail-run", help="trained detail run folder (optional)")
     ex.add_argument("--data", required=True, help="the data set the runs were trained on (fit.npz, manifest), or "
@@ -116,7 +126,7 @@ def _parser() -> argparse.ArgumentParser:
     ex.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
     ex.add_argument("--force", action="store_true", help="write into a non-empty folder")
 
-    ev = sub.add_parser("evaluate", help="per-vertex error of a bundle (and ablation runs) on the test splits")
+    ev = add_command("evaluate", help="per-vertex error of a bundle (and ablation runs) on the test splits")
     ev.add_argument("--data", required=True, help="data set folder (cloth-usd datagen)")
     ev.add_argument("--bundle", required=True, help="model bundle folder")
     ev.add_argument("--ablation-runs", nargs="+", default=[], metavar="RUN",

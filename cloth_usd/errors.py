@@ -12,6 +12,7 @@ __all__ = [
     "SceneError",
     "GarmentError",
     "OutputExistsError",
+    "OutputWriteError",
     "ArgumentError",
     "MotionFileError",
     "BundleError",
@@ -36,6 +37,11 @@ class GarmentError(SceneError):
 
 class OutputExistsError(ClothUsdError):
     """An output file exists and ``--force`` was not given."""
+
+
+class OutputWriteError(ClothUsdError):
+    """USD could not create or save an output layer (no write permission, a full disk,
+    a network share gone); the target is left as it was. Another attempt may succeed."""
 
 
 class ArgumentError(ClothUsdError):

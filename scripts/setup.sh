@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Set up a virtual environment with cloth-usd and its dev extras, then bake the bundled sample.
-# Usage: bash scripts/setup.sh   (idempotent; VENV=path to choose where the environment lives)
+# Set up a virtual environment with what baking needs (cloth-usd and onnxruntime for the
+# learned tiers; no torch, no simulator), then bake the bundled sample with the detail tier.
+# Usage: bash scripts/setup.sh [--no-sample]   (idempotent; VENV=path to choose where the
+#        environment lives). scripts/test.sh adds the training and simulation extras.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${VENV:-.venv}
@@ -9,12 +11,9 @@ if [ ! -x "$VENV/bin/python" ]; then
     "$PY" -m venv "$VENV"
 fi
 "$VENV/bin/python" -m pip install -q --upgrade pip
-# torch first, pinned: this machine type carries the 2.13.0 CPU build; any other version
-# would download gigabytes of CUDA packages. smplx then finds it satisfied.
-"$VENV/bin/python" -m pip install -q "torch==2.13.0"
-"$VENV/bin/python" -m pip install -q -e ".[dev]"
+"$VENV/bin/python" -m pip install -q -e ".[runtime]"
 if [ "${1:-}" != "--no-sample" ]; then
     mkdir -p out
     "$VENV/bin/cloth-usd" bake samples/walk_tshirt/scene.usda -o out/walk_tshirt_cache.usdc \
-        --shot out/walk_tshirt_shot.usda --force
+        --shot out/walk_tshirt_shot.usda --tier detail --force
 fi

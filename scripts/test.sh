@@ -8,6 +8,11 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 VENV=${VENV:-.venv}
 bash scripts/setup.sh --no-sample
+# The tests also train, export and simulate: add the dev extras (torch, newton, ray).
+# torch first, pinned: this machine type carries the 2.13.0 CPU build; any other version
+# would download gigabytes of CUDA packages. smplx then finds it satisfied.
+"$VENV/bin/python" -m pip install -q "torch==2.13.0"
+"$VENV/bin/python" -m pip install -q -e ".[dev]"
 "$VENV/bin/python" -m pytest "$@"
 if [ "${CLOTH_USD_SKIP_BLENDER:-0}" != "1" ]; then
     bash scripts/test_addon.sh

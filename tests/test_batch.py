@@ -290,3 +290,27 @@ def test_ray_executor_without_ray_says_what_to_install(shots, monkeypatch):
     jobs = load_jobs(shots / "shot_a.usda", frames="1:2")
     with pytest.raises(ArgumentError, match=r"pip install 'cloth-usd\[ray\]'"):
         run_batch(jobs, executor="ray")
+
+
+@pytest.mark.parametrize("error, retry, message", [
+    ("write", True, "out.usdc: USD could not save the layer"),  # a full disk, a share gone: worth another try
+    ("argument", False, "out.usdc: </Shirt> has non-finite points"),
+    ("bug", False, "ValueError: a bug"),
+])
+def test_a_task_says_whether_its_error_is_worth_a_retry(tmp_path, monkeypatch, error, retry, message):
+    import cloth_usd.baker
+    from cloth_usd.batch import _Kind, _run_task, _Task
+    from cloth_usd.errors import OutputWriteError
+
+    raised = {"write": OutputWriteError("out.usdc: USD could not save the layer"),
+              "argument": ArgumentError("out.usdc: </Shirt> has non-finite points at time code 2"),
+              "bug": ValueError("a bug")}[error]
+
+    def failing_bake(*args, **kwargs):
+        raise raised
+
+    monkeypatch.setattr(cloth_usd.baker, "bake", failing_bake)
+    job = Job(name="j", stage=tmp_path / "s.usda", output=tmp_path / "out.usdc")
+    out = _run_task(_Task(_Kind.BAKE, job, job.output))
+    assert (out["status"], out["retry"]) == ("error", retry)
+    assert out["error"].startswith(message)

@@ -175,9 +175,29 @@ def test_empty_stage_range_and_unreadable_file(tmp_path, capsys):
     assert "missing.usda" in capsys.readouterr().err
 
 
-def test_verbose_shows_the_traceback(tmp_path, capsys):
-    assert main(["-v", "bake", str(WALK), "-o", str(tmp_path / "c.usdc"), "--tier", "ultra"]) == 2
-    assert "Traceback" in capsys.readouterr().err
+@pytest.mark.parametrize("where", ["before", "after", "none"])
+def test_verbose_shows_the_traceback(tmp_path, capsys, where):
+    args = ["bake", str(WALK), "-o", str(tmp_path / "c.usdc"), "--tier", "ultra"]
+    args = {"before": ["-v", *args], "after": [*args, "--verbose"], "none": args}[where]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert ("Traceback" in err) is (where != "none")
+    assert err.rstrip().splitlines()[-1].startswith("cloth-usd: error: --tier 'ultra'")
+
+
+@pytest.mark.parametrize("argv", [["inspect", "s.usda"], ["bake", "s.usda", "-o", "c.usdc"], ["doctor"],
+                                  ["datagen", "c.toml", "-o", "d"], ["batch", "jobs.toml"],
+                                  ["render", "s.usda", "-o", "p.png", "--frames", "1"],
+                                  ["train", "coarse", "--data", "d", "-o", "r"],
+                                  ["export", "--coarse-run", "r", "--data", "d", "-o", "b", "--name", "n"],
+                                  ["evaluate", "--data", "d", "--bundle", "b", "-o", "e"]])
+def test_verbose_goes_before_or_after_every_command(argv):
+    from cloth_usd.cli import _parser
+
+    assert _parser().parse_args(argv).verbose is False
+    assert _parser().parse_args(["-v", *argv]).verbose is True
+    assert _parser().parse_args([*argv, "-v"]).verbose is True
+    assert _parser().parse_args([argv[0], "--verbose", *argv[1:]]).verbose is True
 
 
 def test_python_api(tmp_path):

@@ -92,7 +92,8 @@ def test_ablation_labels_say_what_differs():
     from types import SimpleNamespace
 
     from cloth_usd.evaluate import _ablation_label
-    from cloth_usd.nn.train import Tier, TrainConfig
+    from cloth_usd.core.scene import Tier
+    from cloth_usd.nn.train import TrainConfig
 
     def run(tier, **config):
         return SimpleNamespace(tier=Tier(tier), config=TrainConfig(**config), path=Path("runs/x"))

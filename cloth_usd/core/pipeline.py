@@ -29,6 +29,7 @@ from typing import Callable
 
 import numpy as np
 
+from ..errors import ArgumentError
 from .body import BodyModel, lbs, shape_body
 from .features import attributes, coarse_features, detail_features, vertex_normals
 from .fit import FitModel, pair_distances
@@ -186,23 +187,29 @@ def detail_model_inputs(pair: GarmentPair, coarse_points: np.ndarray, posed: Pos
 
 
 def coarse_base_points(body: BodyModel, pair: GarmentPair, posed: PosedBody, poses: np.ndarray, transl: np.ndarray,
-                       base: CoarseBase | str = CoarseBase.BODY) -> np.ndarray:
+                       base: CoarseBase | str = CoarseBase.BODY, *, skinned: np.ndarray | None = None) -> np.ndarray:
     """(T, N, 3) float64 the points the coarse displacement is added to [m], world frame.
 
     Args:
         posed: the posed body of these frames (:func:`pose_body`).
         poses: (T, 72) axis-angle [rad]; transl: (T, 3) [m].
         base: :class:`CoarseBase`.
+        skinned: (T, N, 3) float64 the skinned garment of these frames [m], in the frame
+            of ``poses`` (:func:`~cloth_usd.core.skinning.skin_garment` of them), when the
+            caller has it already: the :attr:`CoarseBase.SKINNED` base is then not skinned again.
     """
     if CoarseBase(base) is CoarseBase.BODY:
         return posed.garment_points
+    if skinned is not None:
+        return skinned
     return skin_garment(pair.binding, poses, transl, body.parents)
 
 
 def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray,
               coarse: CoarseFn, detail: DetailFn | None = None, *, batch_size: int = 16,
               margin: float = DEFAULT_MARGIN, coarse_base: CoarseBase | str = CoarseBase.BODY,
-              heading: Heading | str = Heading.WORLD) -> tuple[np.ndarray, np.ndarray]:
+              heading: Heading | str = Heading.WORLD,
+              skinned: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Animate a garment with a coarse model and, if given, a detail model.
 
     ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
@@ -215,20 +222,35 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
         batch_size: frames per model call.
         margin: the post-process clearance [m].
         heading: :class:`~cloth_usd.core.heading.Heading`, as the models were trained.
+        skinned: (T, N, 3) float64 the skinned garment of these frames [m], world frame
+            (:func:`~cloth_usd.core.skinning.skin_garment` of ``poses``, ``transl``), when the
+            caller has it already (the baker's guard needs it too): the skinned coarse base
+            is then taken from it, turned into the canonical heading where the models see
+            one, instead of skinning every frame again. Unused with a body base.
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the garment per frame and
         how many vertices the post-process moved in each.
     """
     num_t, n = poses.shape[0], pair.num_vertices
+    if CoarseBase(coarse_base) is not CoarseBase.SKINNED:
+        skinned = None
+    elif skinned is not None:
+        skinned = np.asarray(skinned, dtype=np.float64)
+        if skinned.shape != (num_t, n, 3):
+            raise ArgumentError(f"skinned: expected ({num_t}, {n}, 3) for {num_t} frames of {n} vertices, "
+                                f"got {skinned.shape}")
     frame = heading_frame(poses, transl, pair.joints[0]) if Heading(heading) is Heading.CANONICAL else None
     if frame is not None:
         poses = frame.canonical_poses(poses)
+        if skinned is not None:
+            skinned = frame.to_canonical(skinned)
     points = np.empty((num_t, n, 3))
     moved = np.zeros(num_t, dtype=np.int64)
     for lo in range(0, num_t, batch_size):
         hi = min(lo + batch_size, num_t)
         posed = pose_body(body, pair, poses[lo:hi], transl[lo:hi])
-        base = coarse_base_points(body, pair, posed, poses[lo:hi], transl[lo:hi], coarse_base)
+        base = coarse_base_points(body, pair, posed, poses[lo:hi], transl[lo:hi], coarse_base,
+                                  skinned=None if skinned is None else skinned[lo:hi])
         m = base + coarse(coarse_model_features(pair, posed, transl[lo:hi]), pair.graph)
         if detail is not None:
             feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])

@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import ArgumentError
+
 __all__ = ["axis_angle_to_matrix", "matrix_to_axis_angle"]
 
 # Above this cosine, the angle is below 90 degrees and the axis is read from the
@@ -30,7 +32,7 @@ def axis_angle_to_matrix(aa: np.ndarray) -> np.ndarray:
     """
     aa = np.asarray(aa, dtype=np.float64)
     if aa.shape[-1:] != (3,):
-        raise ValueError(f"axis-angle must have shape (..., 3), got {aa.shape}")
+        raise ArgumentError(f"aa: axis-angle vectors must have shape (..., 3), got {aa.shape}")
     theta = np.sqrt(np.sum(aa * aa, axis=-1))[..., None, None]
     a = np.sinc(theta / np.pi)  # sin(t) / t
     b = 0.5 * np.sinc(theta / (2.0 * np.pi)) ** 2  # (1 - cos(t)) / t^2
@@ -54,7 +56,7 @@ def matrix_to_axis_angle(rot: np.ndarray) -> np.ndarray:
     """
     rot = np.asarray(rot, dtype=np.float64)
     if rot.shape[-2:] != (3, 3):
-        raise ValueError(f"rotation matrices must have shape (..., 3, 3), got {rot.shape}")
+        raise ArgumentError(f"rot: rotation matrices must have shape (..., 3, 3), got {rot.shape}")
     batch = rot.shape[:-2]
     r = rot.reshape(-1, 3, 3)
     # v = sin(theta) * axis; c = cos(theta).

@@ -159,10 +159,11 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
     import tempfile
 
     from ..core.files import file_sha256
+    from ..core.scene import Tier
     from ..errors import ArgumentError, ClothUsdError
     from ..runtime.bundle import load_bundle, write_bundle
     from .data import FIT, Split, load_dataset
-    from .train import BEST, CoarseInput, Tier, load_run
+    from .train import BEST, CoarseInput, load_run
 
     log = logging.getLogger(__name__)
     data_dir = Path(data_dir)

@@ -38,10 +38,11 @@ from ..core.body import BodyModel, load_body_model
 from ..core.fit import FitModel
 from ..core.heading import Heading, heading_frame
 from ..core.pipeline import CoarseBase, GarmentPair, coarse_base_points, coarse_model_features, pose_body, prepare_pair
+from ..core.scene import Tier
 from ..errors import ArgumentError, ClothUsdError
 from .data import Moments, Split, plan_batches
 from .physics import GarmentRest, Material, garment_energy, garment_rest
-from .train import (BEST, CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, Tier, TrainConfig, TrainResult,
+from .train import (BEST, CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, TrainConfig, TrainResult,
                     _atomic_save, _atomic_text, _coarse_forward, _rng_state, _Tensors, _write_history, build_model,
                     plot_history)
 

@@ -50,6 +50,7 @@ from ..core.files import file_sha256, read_config
 from ..core.graph import MeshGraph
 from ..core.heading import Heading
 from ..core.pipeline import CoarseBase
+from ..core.scene import Tier
 from ..errors import ArgumentError, ClothUsdError
 from ..runtime.io import COARSE_INPUTS, DETAIL_INPUTS, coarse_inputs, detail_inputs
 from .data import (
@@ -68,9 +69,9 @@ from .data import (
 )
 from .models import CoarseConfig, CoarseGenerator, DetailConfig, DetailGenerator
 
-__all__ = ["Tier", "Objective", "CoarseInput", "TrainConfig", "load_train_config", "resume_settings", "EpochRecord",
-           "TrainResult", "train", "load_run", "Run", "torch_coarse_fn", "torch_detail_fn", "pick_device",
-           "plot_history"]
+__all__ = ["TRAINABLE_TIERS", "Objective", "CoarseInput", "TrainConfig", "load_train_config", "resume_settings",
+           "EpochRecord", "TrainResult", "train", "load_run", "Run", "torch_coarse_fn", "torch_detail_fn",
+           "pick_device", "plot_history"]
 
 log = logging.getLogger(__name__)
 
@@ -84,11 +85,25 @@ CURVE = "curve.png"
 RUN_FORMAT = 1
 
 
-class Tier(str, enum.Enum):
-    """The trainable tiers."""
+#: The tiers that have a generator to train (skinning has no model).
+TRAINABLE_TIERS = (Tier.COARSE, Tier.DETAIL)
 
-    COARSE = "coarse"
-    DETAIL = "detail"
+
+def _trainable(tier: Tier | str, where: str = "tier") -> Tier:
+    """``tier`` as a :class:`~cloth_usd.core.scene.Tier` of :data:`TRAINABLE_TIERS`.
+
+    Raises:
+        ArgumentError: naming ``where`` and the valid tiers.
+    """
+    try:
+        chosen = Tier(tier)
+    except ValueError:
+        chosen = None
+    if chosen not in TRAINABLE_TIERS:
+        value = tier.value if isinstance(tier, Tier) else tier
+        raise ArgumentError(f"{where} {value!r}: not a trainable tier "
+                            f"(valid: {', '.join(t.value for t in TRAINABLE_TIERS)})")
+    return chosen
 
 
 class Objective(str, enum.Enum):
@@ -217,7 +232,7 @@ def resume_settings(run_dir: str | Path, *, epochs: int | None = None) -> tuple[
 
 def model_config(tier: Tier | str, config: TrainConfig) -> CoarseConfig | DetailConfig:
     """The model config a TrainConfig asks for (paper widths times ``width``)."""
-    if Tier(tier) is Tier.COARSE:
+    if _trainable(tier) is Tier.COARSE:
         return CoarseConfig(width=config.width, decompose=config.decompose)
     return DetailConfig(width=config.width, decompose=config.decompose, use_parser=config.use_parser)
 
@@ -360,7 +375,7 @@ def load_run(run_dir: str | Path, *, device: torch.device | str = "cpu", best: b
     """
     run_dir = Path(run_dir)
     info = _read_run_json(run_dir)
-    tier = Tier(info["tier"])
+    tier = _trainable(info["tier"], f"{run_dir / RUN}: tier")
     config = TrainConfig.from_mapping(info["config"], str(run_dir / RUN))
     model = build_model(tier, config).to(device)
     state = _torch_load(run_dir / (BEST if best else CHECKPOINT), device)
@@ -581,10 +596,10 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
         dataset: an already loaded data set of ``data_dir`` (tests; skips loading).
         progress: called after every epoch.
     Raises:
-        ArgumentError: bad folders, a run that exists without ``resume``, a resumed run
-            whose config or data differ.
+        ArgumentError: a tier that is not trainable (skinning), bad folders, a run that exists
+            without ``resume``, a resumed run whose config or data differ.
     """
-    tier = Tier(tier)
+    tier = _trainable(tier)
     if config.objective is not Objective.SUPERVISED:
         raise ArgumentError(f"train: objective {config.objective.value!r} trains on a data set config, not on "
                             "simulated data (cloth_usd.nn.physics_train.train_physics; cloth-usd train coarse "

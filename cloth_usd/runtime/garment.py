@@ -81,7 +81,7 @@ class LearnedGarment:
         return self.graph.num_vertices
 
     def evaluate(self, tier: Tier | str, poses: np.ndarray, transl: np.ndarray, *,
-                 batch_size: int = 16) -> LearnedFrames:
+                 batch_size: int = 16, skinned: np.ndarray | None = None) -> LearnedFrames:
         """Animate the garment.
 
         Args:
@@ -89,6 +89,10 @@ class LearnedGarment:
             poses: (T, 72) axis-angle [rad], canonical body frame.
             transl: (T, 3) SMPL root translation [m].
             batch_size: frames per model call.
+            skinned: (T, N, 3) float64 the skinned garment of these frames [m], internal
+                world frame (:func:`~cloth_usd.core.skinning.skin_garment` with
+                :attr:`binding`), when the caller has it already: a bundle whose coarse
+                base is the skinned garment then does not skin the frames again.
         Returns:
             The garment points per frame and the post-process counts.
         """
@@ -114,5 +118,5 @@ class LearnedGarment:
         points, moved = run_tiers(self.body, self.pair, poses, transl, run_coarse,
                                   run_detail if detail is not None else None, batch_size=batch_size,
                                   margin=self.margin, coarse_base=self.bundle.coarse_base,
-                                  heading=self.bundle.heading)
+                                  heading=self.bundle.heading, skinned=skinned)
         return LearnedFrames(points=points, moved=moved)

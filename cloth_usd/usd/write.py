@@ -22,7 +22,7 @@ import numpy as np
 from pxr import Sdf, Tf, Vt
 
 from ..core.scene import StageInfo
-from ..errors import ArgumentError, OutputExistsError
+from ..errors import ArgumentError, OutputExistsError, OutputWriteError
 
 __all__ = ["CacheLayerWriter", "CacheInfo", "write_shot_layer", "check_output_path", "cache_layer_info",
            "stitch_layers", "remove_stale_temps"]
@@ -90,7 +90,8 @@ def remove_stale_temps(path: str | Path) -> list[Path]:
 
 def _commit(layer: Sdf.Layer, tmp: Path, path: Path, force: bool) -> None:
     if not layer.Save():
-        raise OSError(f"{tmp}: USD could not save the layer")
+        raise OutputWriteError(f"{path}: USD could not save the layer (to {tmp}); check the folder's "
+                               "permissions and free space")
     if path.exists() and not force:
         tmp.unlink(missing_ok=True)
         raise OutputExistsError(f"{path}: appeared while baking; pass --force to replace it")
@@ -124,7 +125,8 @@ class CacheLayerWriter:
         self._tmp = _temp_path(self.path)
         self._layer = Sdf.Layer.CreateNew(str(self._tmp))
         if self._layer is None:
-            raise OSError(f"{self._tmp}: USD could not create a layer here")
+            raise OutputWriteError(f"{self.path}: USD could not create a layer (at {self._tmp}); check "
+                                   "the folder's permissions and free space")
         _copy_stage_metadata(self._layer, stage, start, end)
         self._attrs: dict[str, tuple[Sdf.Path, Sdf.Path]] = {}
         self._committed = False
@@ -150,11 +152,14 @@ class CacheLayerWriter:
         Args:
             times: (T,) float64 time codes.
             points: (T, N, 3) float points in the garment prim's own space and units.
+        Raises:
+            ArgumentError: a non-finite point, naming the prim and the time code.
         """
         points = np.ascontiguousarray(points, dtype=np.float32)
         if not np.all(np.isfinite(points)):
             bad = int(np.nonzero(~np.isfinite(points).all(axis=(1, 2)))[0][0])
-            raise ValueError(f"{prim_path}: non-finite points at time code {times[bad]}")
+            raise ArgumentError(f"{self.path}: <{prim_path}> has non-finite points at time code {times[bad]:g}; "
+                                "nothing was written")
         pts_path, ext_path = self._specs(prim_path)
         lo, hi = points.min(axis=1), points.max(axis=1)
         for i, t in enumerate(np.asarray(times, dtype=np.float64)):

@@ -94,3 +94,24 @@ def test_without_the_canonical_heading_the_same_models_depend_on_it(shirt):
     got, _ = run_tiers(body, pair, p, t, _wavy_coarse, _wavy_detail, heading=Heading.WORLD)
     local = turn.inv().apply(got.reshape(-1, 3)).reshape(got.shape)
     assert np.abs(local - ref).max() > 2e-3
+
+
+@pytest.mark.parametrize("heading", list(Heading))
+@pytest.mark.parametrize("base", list(CoarseBase))
+def test_precomputed_world_skinning_is_the_skinned_base_in_either_heading(shirt, heading, base):
+    """The baker skins each frame once and hands the world-frame result to run_tiers."""
+    from cloth_usd.core.skinning import skin_garment
+
+    body, pair, poses, transl = shirt
+    ref, ref_moved = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail, coarse_base=base,
+                               heading=heading, batch_size=2)
+    skinned = skin_garment(pair.binding, poses, transl, body.parents)
+    got, moved = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail, coarse_base=base,
+                           heading=heading, batch_size=2, skinned=skinned)
+    if heading is Heading.WORLD:  # the same numbers, not merely close ones
+        np.testing.assert_array_equal(got, ref)
+    else:  # skinned in the world and turned, or skinned turned: round-off apart
+        np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(moved, ref_moved)
+    with pytest.raises(ArgumentError, match=r"skinned: expected \(5, \d+, 3\)"):
+        run_tiers(body, pair, poses, transl, _wavy_coarse, coarse_base=CoarseBase.SKINNED, skinned=skinned[:4])

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from cloth_usd.core.rotations import axis_angle_to_matrix, matrix_to_axis_angle
+from cloth_usd.errors import ArgumentError
 
 
 def _random_axis_angle(rng: np.random.Generator, n: int, lo: float, hi: float) -> np.ndarray:
@@ -69,9 +70,9 @@ def test_tolerates_float32_round_off():
 
 
 def test_bad_shapes_raise():
-    with pytest.raises(ValueError):
+    with pytest.raises(ArgumentError, match=r"aa: .*\(\.\.\., 3\), got \(2, 4\)"):
         axis_angle_to_matrix(np.zeros((2, 4)))
-    with pytest.raises(ValueError):
+    with pytest.raises(ArgumentError, match=r"rot: .*\(\.\.\., 3, 3\), got \(3, 4\)"):
         matrix_to_axis_angle(np.zeros((3, 4)))
 
 

@@ -16,7 +16,8 @@ from cloth_usd.core.pipeline import CoarseBase  # noqa: E402
 from cloth_usd.errors import ArgumentError  # noqa: E402
 from cloth_usd.nn.data import Split  # noqa: E402
 from cloth_usd.nn.physics_train import _energy, _frames, _statistics, physics_set, train_physics  # noqa: E402
-from cloth_usd.nn.train import Objective, Tier, TrainConfig, _coarse_forward, _Tensors, build_model, load_run  # noqa: E402
+from cloth_usd.core.scene import Tier  # noqa: E402
+from cloth_usd.nn.train import Objective, TrainConfig, _coarse_forward, _Tensors, build_model, load_run  # noqa: E402
 
 pytestmark = pytest.mark.slow
 PHYSICS = TrainConfig(objective="physics", coarse_base="skinned", width=0.0625, epochs=2, batch=3, max_batches=2,

@@ -13,6 +13,7 @@ torch = pytest.importorskip("torch", reason="training needs torch (pip install '
 from train_data import TINY_TRAIN, tiny_dataset, tiny_runs, tiny_trained_bundle  # noqa: E402
 
 from cloth_usd.core.pipeline import run_tiers  # noqa: E402
+from cloth_usd.core.scene import Tier  # noqa: E402
 from cloth_usd.errors import ArgumentError  # noqa: E402
 from cloth_usd.datagen.dataset import laplacian_smooth  # noqa: E402
 from cloth_usd.nn.data import (  # noqa: E402
@@ -32,7 +33,6 @@ from cloth_usd.nn.train import (  # noqa: E402
     _Examples,
     _forward,
     _statistics,
-    Tier,
     build_model,
     load_run,
     torch_coarse_fn,
@@ -127,6 +127,18 @@ def test_runs_write_checkpoints_history_curve_and_statistics(tmp_path_factory):
     np.testing.assert_allclose(detail.model.parser.input_std.numpy(),
                                Statistics.load(detail_dir / "stats.npz").attribute_std, rtol=1e-6)
     assert detail.info["coarse_run"]["best_sha256"]
+
+
+def test_only_the_learned_tiers_train_or_build(tmp_path):
+    for bad in ("skinning", Tier.SKINNING, "wrinkles"):
+        with pytest.raises(ArgumentError, match=r"not a trainable tier \(valid: coarse, detail\)"):
+            train(bad, tmp_path / "data", tmp_path / "run", QUICK, device="cpu")
+        with pytest.raises(ArgumentError, match="valid: coarse, detail"):
+            build_model(bad, QUICK)
+    (tmp_path / "run").mkdir()
+    (tmp_path / "run" / "run.json").write_text(json.dumps({"format": 1, "tier": "skinning", "config": {}}))
+    with pytest.raises(ArgumentError, match=r"run\.json: tier 'skinning': not a trainable tier"):
+        load_run(tmp_path / "run")
 
 
 def test_resume_continues_bit_identically(data, tmp_path):

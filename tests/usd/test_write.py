@@ -67,7 +67,7 @@ def test_failure_mid_write_leaves_nothing(tmp_path):
 def test_non_finite_points_are_refused(tmp_path):
     pts = np.zeros((2, 4, 3))
     pts[1, 2, 0] = np.nan
-    with pytest.raises(ValueError, match="/Shirt.*time code 2"):
+    with pytest.raises(ArgumentError, match=r"c\.usdc: </Shirt> has non-finite points at time code 2"):
         with CacheLayerWriter(tmp_path / "c.usdc", stage=_info(), start=1, end=2) as w:
             w.add_points("/Shirt", np.array([1.0, 2.0]), pts)
     assert list(tmp_path.iterdir()) == []
@@ -103,3 +103,21 @@ def test_shot_layer_puts_the_cache_above_the_scene(tmp_path):
     shot_stage = Usd.Stage.Open(str(shot))
     composed = shot_stage.GetPrimAtPath("/Shirt").GetAttribute("points")
     assert tuple(composed.Get(2.0)[0]) == (1, 2, 3)
+
+
+def test_a_layer_usd_cannot_create_or_save_is_an_output_write_error(tmp_path, monkeypatch):
+    from types import SimpleNamespace
+
+    from cloth_usd.errors import OutputWriteError
+    from cloth_usd.usd import write
+
+    class Unsaved:
+        def Save(self):
+            return False
+
+    with pytest.raises(OutputWriteError, match=r"cache\.usdc: USD could not save the layer"):
+        write._commit(Unsaved(), tmp_path / ".cache.x.tmp.usdc", tmp_path / "cache.usdc", False)
+    monkeypatch.setattr(write, "Sdf", SimpleNamespace(Layer=SimpleNamespace(CreateNew=lambda path: None)))
+    with pytest.raises(OutputWriteError, match=r"cache\.usdc: USD could not create a layer"):
+        CacheLayerWriter(tmp_path / "cache.usdc", stage=_info(), start=1, end=2)
+    assert list(tmp_path.iterdir()) == []
