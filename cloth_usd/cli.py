@@ -135,6 +135,28 @@ def _parser() -> argparse.ArgumentParser:
     ev.add_argument("--max-frames", type=int, help="only the first frames of every sequence")
     ev.add_argument("--device", default="cpu", help="torch device of the ablation runs: cpu (default), cuda, auto")
     ev.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
+
+    im = add_command("import-motion", help="a BVH or AMASS .npz motion as a new shot: an SMPL character "
+                                           "wearing the given garments, ready to bake")
+    im.add_argument("motion", metavar="FILE", help="BVH (CMU cgspeed MotionBuilder or Daz names, Mixamo, SMPL; "
+                                                   "others with --joint-map) or AMASS-style .npz")
+    im.add_argument("-o", "--output", required=True, help="shot stage to write (.usda, .usdc, .usd)")
+    im.add_argument("--garment", action="append", default=[], metavar="GARMENT.usda",
+                    help="USD file whose garment Mesh (cloth:category) is referenced and bound to the "
+                         "character (repeatable)")
+    im.add_argument("--betas", help="B0,B1,... body shape (default: the AMASS file's, else the garments' "
+                                    "skeleton's, else the mean shape)")
+    im.add_argument("--gender", choices=["neutral", "female", "male"],
+                    help="smpl:gender (default: the AMASS file's, else neutral)")
+    im.add_argument("--fps", type=float, help="frame rate of the shot (default 30; the motion is resampled)")
+    im.add_argument("--frames", metavar="A:B", help="the file's frames A..B, 0-based, inclusive (default: all; "
+                                                    "for CMU cgspeed files, all but their T-pose frame 0)")
+    im.add_argument("--start", type=float, default=1001.0, help="first time code (default 1001)")
+    im.add_argument("--joint-map", metavar="FILE",
+                    help="JSON object (or .toml table) {\"BVH joint\": \"SMPL joint\"} for rigs not recognised; "
+                         "its entries replace a recognised rig's")
+    im.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
+    im.add_argument("--force", action="store_true", help="replace an existing output file")
     return p
 
 
@@ -310,6 +332,22 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _import_motion(args: argparse.Namespace) -> int:
+    from .motion_import import import_motion, parse_betas
+
+    result = import_motion(args.motion, args.output, garments=args.garment,
+                           betas=None if args.betas is None else parse_betas(args.betas), gender=args.gender,
+                           fps=args.fps, frames=args.frames, joint_map=args.joint_map, force=args.force,
+                           start=args.start, body_model=args.body_model)
+    first, last = result.source_frames
+    sys.stdout.write(f"{args.motion}: {result.rig}, file frames {first}:{last} -> {result.frames} frames at "
+                     f"{result.fps:g} fps (time codes {result.start:g}:{result.start + result.frames - 1:g})\n")
+    for g in result.garments:
+        sys.stdout.write(f"{g}: bound to the character\n")
+    sys.stdout.write(f"wrote {result.output}\n")
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the process exit code."""
     args = _parser().parse_args(argv)
@@ -318,7 +356,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         commands = {"inspect": _inspect, "bake": _bake, "doctor": _doctor, "render": _render, "batch": _batch,
                     "datagen": _datagen,
-                    "train": _train, "export": _export, "evaluate": _evaluate}
+                    "train": _train, "export": _export, "evaluate": _evaluate,
+                    "import-motion": _import_motion}
         return commands[args.command](args)
     except ClothUsdError as exc:
         if args.verbose:

@@ -6,14 +6,19 @@ they are listed (``Zrotation Xrotation Yrotation`` gives ``Rz @ Rx @ Ry``, angle
 degrees); a joint with position channels takes them as its local translation instead
 of its OFFSET (as Blender's importer does).
 
-Retargeting works on world-space rotation deltas, so the two skeletons need not share
-bone lengths, joint counts or local axes. The ASSUMPTION: in the reference posture
-(the BVH rest, every channel zero, unless ``reference_frame`` names a frame) the
-character stands in a T-pose facing +Z of SMPL's frame after the ``up_axis``
-conversion, i.e. in the posture of SMPL's rest. Mixamo and most Truebones files are
-authored that way; files whose rest is not a T-pose (many CMU conversions) need
-``reference_frame`` pointing at a T-pose frame. A warning is logged when the
-reference posture's left upper arm is far from +X.
+Retargeting works on world-space rotations, so the two skeletons need not share bone
+lengths, joint counts or local axes. Each mapped bone's direction in the reference
+posture (the BVH rest, every channel zero, unless ``reference_frame`` names a frame) is
+turned onto the same bone's direction in SMPL's T-pose, so a rig whose rest is a T-pose,
+an A-pose or the arms hanging retargets the same way: at every frame each mapped SMPL
+bone points where the BVH bone points (after the ``up_axis`` conversion), and its twist
+follows the BVH joint's. ``align_rest=False`` keeps the older rule, which takes the
+reference posture to BE SMPL's T-pose (exact joint rotations for rigs built like SMPL).
+
+Known rigs (:data:`BVH_RIGS`, told apart by :func:`detect_rig`): CMU's cgspeed
+conversions with MotionBuilder names (``cmu-mb``: root ``Hips``, 31 joints) and Daz
+names (``cmu-daz``: root ``hip``, 43 joints), Mixamo (``mixamo``, any ``mixamorig:``
+namespace) and BVH exported from SMPL (``smpl``).
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from __future__ import annotations
 import logging
 import re
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,15 +40,20 @@ from .motion import MotionFileError, blend_from_rest, resample
 __all__ = [
     "Bvh",
     "BvhError",
+    "BVH_RIGS",
     "DEFAULT_BVH_MAPPING",
     "REQUIRED_JOINTS",
     "SMPL_NAMED_BVH_MAPPING",
     "bvh_forward_kinematics",
+    "detect_rig",
     "detect_scale",
+    "detect_up_axis",
     "load_bvh",
     "parse_bvh",
     "read_bvh",
     "retarget_bvh",
+    "rig_mapping",
+    "trim_bvh",
 ]
 
 log = logging.getLogger(__name__)
@@ -337,7 +347,7 @@ _LEFT_ALIASES = {  # normalised BVH names (lower case, namespace stripped) -> SM
     "left_shoulder": ("leftarm", "leftupperarm", "leftuparm", "lshldr", "l_upperarm", "upperarm_l"),
     "left_elbow": ("leftforearm", "leftlowerarm", "leftelbow", "lforearm", "l_forearm", "lowerarm_l"),
     "left_wrist": ("lefthand", "leftwrist", "lhand", "l_hand", "hand_l"),
-    "left_hand": ("lefthandmiddle1", "leftfingerbase", "lefthandindex1", "middle_01_l"),
+    "left_hand": ("lefthandmiddle1", "leftfingerbase", "lefthandindex1", "middle_01_l", "lmid1"),
 }
 _MID_ALIASES = {
     "pelvis": ("hips", "hip", "pelvis"),
@@ -376,16 +386,116 @@ REQUIRED_JOINTS: tuple[str, ...] = ("pelvis", "left_hip", "right_hip", "left_kne
                                     "left_shoulder", "right_shoulder", "left_elbow", "right_elbow")
 
 
+def _rig(mid: Mapping[str, str], left: Mapping[str, str], right_of) -> dict[str, str]:
+    """A rig's table from its middle joints and its left side (the right side mirrored)."""
+    table = dict(mid)
+    for name, smpl in left.items():
+        table[name] = smpl
+        table[right_of(name)] = "right_" + smpl[5:]
+    return table
+
+
+def _left_to_right(name: str) -> str:
+    return "Right" + name[4:]
+
+
+#: The BVH rigs recognised without a joint map: rig name -> {BVH joint: SMPL joint}.
+#: ``cmu-mb``: the cgspeed MotionBuilder-friendly conversion of the CMU database (root
+#: ``Hips``, 31 joints). Its ``LeftShoulder`` is CMU's clavicle (``lclavicle``: it sits
+#: on the chest, its bone runs to ``LeftArm``, the shoulder) and ``LeftArm`` the upper
+#: arm; ``LHipJoint``, ``Neck1`` and the finger joints are extra. ``cmu-daz``: the
+#: Daz-friendly conversion (root ``hip``, 43 joints; ``lButtock``, eyes and fingers
+#: extra; no toe joint). ``mixamo``: Mixamo's names, with or without the ``mixamorig:``
+#: namespace. ``smpl``: BVH exported from SMPL (:data:`SMPL_NAMED_BVH_MAPPING`).
+BVH_RIGS: Mapping[str, Mapping[str, str]] = {
+    "cmu-mb": _rig(
+        {"Hips": "pelvis", "LowerBack": "spine1", "Spine": "spine2", "Spine1": "spine3", "Neck": "neck",
+         "Head": "head"},
+        {"LeftUpLeg": "left_hip", "LeftLeg": "left_knee", "LeftFoot": "left_ankle", "LeftToeBase": "left_foot",
+         "LeftShoulder": "left_collar", "LeftArm": "left_shoulder", "LeftForeArm": "left_elbow",
+         "LeftHand": "left_wrist", "LeftFingerBase": "left_hand"}, _left_to_right),
+    "cmu-daz": _rig(
+        {"hip": "pelvis", "abdomen": "spine1", "chest": "spine3", "neck": "neck", "head": "head"},
+        {"lThigh": "left_hip", "lShin": "left_knee", "lFoot": "left_ankle", "lCollar": "left_collar",
+         "lShldr": "left_shoulder", "lForeArm": "left_elbow", "lHand": "left_wrist", "lMid1": "left_hand"},
+        lambda n: "r" + n[1:]),
+    "mixamo": _rig(
+        {"Hips": "pelvis", "Spine": "spine1", "Spine1": "spine2", "Spine2": "spine3", "Neck": "neck",
+         "Head": "head"},
+        {"LeftUpLeg": "left_hip", "LeftLeg": "left_knee", "LeftFoot": "left_ankle", "LeftToeBase": "left_foot",
+         "LeftShoulder": "left_collar", "LeftArm": "left_shoulder", "LeftForeArm": "left_elbow",
+         "LeftHand": "left_wrist", "LeftHandMiddle1": "left_hand"}, _left_to_right),
+    "smpl": SMPL_NAMED_BVH_MAPPING,
+}
+
+#: Joints (normalised names) whose presence tells a rig apart from the others.
+_RIG_SIGNATURES = {
+    "cmu-mb": ("lowerback", "lhipjoint", "neck1"),
+    "cmu-daz": ("abdomen", "lshldr", "lbuttock"),
+    "mixamo": ("spine2", "leftarm", "leftupleg"),
+    "smpl": ("pelvis", "l_hip", "l_shoulder"),
+}
+
+
 def _normalise(name: str) -> str:
     return re.split(r"[:|]", name)[-1].strip().lower()
+
+
+def detect_rig(bvh: Bvh) -> str | None:
+    """The name of the :data:`BVH_RIGS` rig the file's joint names follow, or None.
+
+    A rig matches when the file has its signature joints and every joint of
+    :data:`REQUIRED_JOINTS` that the rig names; the first match in :data:`BVH_RIGS`
+    order wins (``cmu-mb`` before ``mixamo``, which share most names).
+    """
+    names = {_normalise(n) for n in bvh.names}
+    for rig, table in BVH_RIGS.items():
+        required = [k for k, v in table.items() if v in REQUIRED_JOINTS]
+        if all(n in names for n in _RIG_SIGNATURES[rig]) and all(_normalise(k) in names for k in required):
+            return rig
+    return None
+
+
+def rig_mapping(bvh: Bvh, joint_map: Mapping[str, str] | None = None) -> tuple[str | None, dict[str, str]]:
+    """The BVH joint -> SMPL joint table for a file: its rig's, overridden by ``joint_map``.
+
+    Entries of ``joint_map`` replace the rig's entries for the same SMPL joints, so a map
+    may rename a few joints and let the rig name the rest; without a recognised rig the
+    map is used alone.
+
+    Returns:
+        ``(rig name or None, mapping)``; the mapping is empty when there is neither.
+    """
+    rig = detect_rig(bvh)
+    table = dict(BVH_RIGS[rig]) if rig else {}
+    if joint_map:
+        replaced = set(joint_map.values())
+        table = {k: v for k, v in table.items() if v not in replaced}
+        table.update(joint_map)
+    return rig, table
+
+
+def trim_bvh(bvh: Bvh, start: int, stop: int) -> Bvh:
+    """The file's frames ``start..stop`` (0-based, both included) as a new :class:`Bvh`.
+
+    Raises:
+        ArgumentError: the range is empty or outside the file's frames.
+    """
+    if not 0 <= start <= stop < bvh.num_frames:
+        raise ArgumentError(f"frames {start}:{stop} are outside {bvh.source}'s frames 0:{bvh.num_frames - 1}")
+    return replace(bvh, motion=bvh.motion[start:stop + 1].copy())
 
 
 def _resolve_mapping(bvh: Bvh, mapping: Mapping[str, str] | None) -> dict[int, int]:
     """SMPL joint index -> BVH joint index."""
     if mapping is None:
-        tables = (DEFAULT_BVH_MAPPING, SMPL_NAMED_BVH_MAPPING)
-        hits = [sum(_normalise(n) in t for n in bvh.names) for t in tables]
-        mapping = tables[int(np.argmax(hits))]
+        rig = detect_rig(bvh)
+        if rig is not None:
+            mapping = BVH_RIGS[rig]
+        else:
+            tables = (DEFAULT_BVH_MAPPING, SMPL_NAMED_BVH_MAPPING)
+            hits = [sum(_normalise(n) in t for n in bvh.names) for t in tables]
+            mapping = tables[int(np.argmax(hits))]
     table = {}
     for bvh_name, smpl_name in mapping.items():
         if smpl_name not in JOINT_NAMES:
@@ -412,19 +522,28 @@ def retarget_bvh(
     *,
     mapping: Mapping[str, str] | None = None,
     fps: float | None = None,
-    up_axis: str = "Y",
+    up_axis: str | None = "Y",
     scale: float | None = None,
     reference_frame: int | None = None,
     blend_seconds: float = 0.5,
     required: Iterable[str] = REQUIRED_JOINTS,
+    align_rest: bool = True,
+    smpl_joints: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Retarget a BVH motion onto the 24 SMPL joints.
 
-    For each mapped joint, SMPL's world rotation is ``C G(t) G_ref^-1 C^-1``: the BVH
-    world rotation at frame t relative to the reference posture (see the module
-    docstring for the T-pose assumption), with C the up-axis conversion. SMPL local
-    rotations follow through SMPL's parents; unmapped SMPL joints keep their parent's
-    world rotation (identity local rotation).
+    For each mapped joint, SMPL's world rotation is ``C G(t) G_ref^-1 C^-1 A``: the BVH
+    world rotation at frame t relative to the reference posture, with C the up-axis
+    conversion, after ``A``, the rest alignment. ``A`` turns SMPL's T-pose bone (from
+    the joint to its mapped SMPL child) onto the BVH bone in the reference posture;
+    a joint with several children (pelvis, chest) takes the rotation that best turns
+    all of them (least squares), a joint with none its parent's. A joint with one child
+    then gets the smallest extra turn that points its bone exactly along the BVH bone
+    at frame t (BVH joints between the two mapped ones, such as CMU's ``Neck1``, bend
+    it too). SMPL local rotations follow through SMPL's parents; unmapped SMPL joints
+    keep their parent's world rotation (identity local rotation). With
+    ``align_rest=False``, ``A`` is the identity and nothing is corrected: the
+    reference posture must be SMPL's T-pose (a warning says when its arm is not).
 
     Args:
         bvh: a parsed file (:func:`read_bvh`).
@@ -432,12 +551,17 @@ def retarget_bvh(
             :data:`DEFAULT_BVH_MAPPING` and :data:`SMPL_NAMED_BVH_MAPPING` maps more joints.
             To extend the default: ``{**DEFAULT_BVH_MAPPING, "MyHip": "pelvis"}``.
         fps: output frame rate [1/s]; None keeps the file's.
-        up_axis: the file's up axis, ``"Y"`` (facing +Z) or ``"Z"`` (facing -Y).
+        up_axis: the file's up axis, ``"Y"`` or ``"Z"``; None detects it
+            (:func:`detect_up_axis`). The facing direction does not matter.
         scale: metres per file unit; None guesses it (:func:`detect_scale`).
-        reference_frame: a frame in which the character stands in SMPL's T-pose; None
+        reference_frame: the frame whose posture is aligned to SMPL's T-pose; None
             uses the BVH rest posture (every channel zero).
         blend_seconds: ease-in from the SMPL rest pose [s]; 0 keeps the motion as is.
         required: SMPL joints that must be mapped.
+        align_rest: align each bone's reference direction to SMPL's T-pose (above).
+        smpl_joints: (24, 3) float SMPL rest joint positions [m] whose T-pose bones
+            the alignment aims at (the body's ``J(betas)``); None uses the embedded
+            model's mean shape.
     Returns:
         ``(poses (T, 72) axis-angle [rad], root_offset (T, 3) [m])``: the root offset is
         the hips' displacement from frame 0, in SMPL's axes.
@@ -445,8 +569,8 @@ def retarget_bvh(
         BvhError: a required joint is not in the file (the message names file and joint).
         ArgumentError: a bad ``up_axis``, ``scale``, ``fps``, ``reference_frame`` or mapping.
     """
-    up = up_axis.upper()
-    if up not in _UP_CONVERSION:
+    up = None if up_axis is None else up_axis.upper()
+    if up is not None and up not in _UP_CONVERSION:
         raise ArgumentError(f"up_axis must be one of {', '.join(_UP_CONVERSION)}, got {up_axis!r}")
     if scale is not None and not scale > 0:
         raise ArgumentError(f"scale must be > 0 (metres per file unit), got {scale}")
@@ -466,25 +590,37 @@ def retarget_bvh(
                        f"(missing: {', '.join(missing)}; looked for {', '.join(aliases) or 'nothing'}); "
                        f"the file's joints are {', '.join(bvh.names)}; pass mapping= to name them")
 
+    if up is None:
+        up = detect_up_axis(bvh, mapping)
     world_rot, world_pos = bvh_forward_kinematics(bvh)
     conv = _UP_CONVERSION[up]
     if reference_frame is None:
         ref_rot, ref_pos = bvh_forward_kinematics(bvh, rest=True)
     else:
         ref_rot, ref_pos = world_rot[[reference_frame]], world_pos[[reference_frame]]
-    _check_t_pose(bvh, found, conv, ref_pos[0])
     delta = conv @ world_rot @ np.swapaxes(ref_rot, -1, -2) @ conv.T  # (T, J, 3, 3)
 
     n = bvh.num_frames
-    glob = np.empty((n, NUM_JOINTS, 3, 3))
-    local = np.empty_like(glob)
-    for s in range(NUM_JOINTS):
-        p = PARENTS[s]
-        if s in found:
-            glob[:, s] = delta[:, found[s]]
-        else:
-            glob[:, s] = np.eye(3) if p < 0 else glob[:, p]
-        local[:, s] = glob[:, s] if p < 0 else np.swapaxes(glob[:, p], -1, -2) @ glob[:, s]
+    if align_rest:
+        if smpl_joints is None:
+            from ..core.body import load_body_model, shape_body
+
+            smpl_joints = shape_body(load_body_model(), np.zeros(1))[1]
+        smpl_joints = np.asarray(smpl_joints, dtype=np.float64)
+        if smpl_joints.shape != (NUM_JOINTS, 3) or not np.all(np.isfinite(smpl_joints)):
+            raise ArgumentError(f"smpl_joints must be (24, 3) finite positions, got shape {smpl_joints.shape}")
+        glob = _aligned_rotations(found, delta, world_pos @ conv.T, ref_pos[0] @ conv.T, smpl_joints)
+    else:
+        _check_t_pose(bvh, found, conv, ref_pos[0])
+        glob = np.empty((n, NUM_JOINTS, 3, 3))
+        for s in range(NUM_JOINTS):
+            p = PARENTS[s]
+            if s in found:
+                glob[:, s] = delta[:, found[s]]
+            else:
+                glob[:, s] = np.eye(3) if p < 0 else glob[:, p]
+    local = glob.copy()
+    local[:, 1:] = np.swapaxes(glob[:, PARENTS[1:]], -1, -2) @ glob[:, 1:]
     poses = matrix_to_axis_angle(local).reshape(n, 72)
 
     metres = detect_scale(bvh) if scale is None else float(scale)
@@ -496,6 +632,118 @@ def retarget_bvh(
     if blend_seconds > 0:
         poses = blend_from_rest(poses, max(1, int(round(blend_seconds * out_fps))))
     return poses, root
+
+
+_CHILDREN = tuple(tuple(c for c in range(NUM_JOINTS) if PARENTS[c] == j) for j in range(NUM_JOINTS))
+
+
+def _aligned_rotations(found: dict[int, int], delta: np.ndarray, pos: np.ndarray, ref_pos: np.ndarray,
+                       smpl_joints: np.ndarray) -> np.ndarray:
+    """SMPL world rotations (T, 24, 3, 3) with each bone turned onto the BVH's.
+
+    Args:
+        found: SMPL joint -> BVH joint.
+        delta: (T, J, 3, 3) BVH world rotations relative to the reference posture, SMPL axes.
+        pos: (T, J, 3) BVH joint positions, SMPL axes [file units].
+        ref_pos: (J, 3) the same in the reference posture.
+        smpl_joints: (24, 3) SMPL rest joint positions [m].
+    """
+    eps = 1e-3 * max(float(np.max(np.ptp(ref_pos, axis=0))), 1e-12)
+
+    def targets(s: int, c: int) -> list[int]:
+        """The first mapped SMPL joints below ``c`` (or ``c``) that lie away from ``s`` at rest."""
+        if c in found and np.linalg.norm(ref_pos[found[c]] - ref_pos[found[s]]) > eps:
+            return [c]
+        return [d for cc in _CHILDREN[c] for d in targets(s, cc)]
+
+    n = delta.shape[0]
+    glob = np.empty((n, NUM_JOINTS, 3, 3))
+    align = np.empty((NUM_JOINTS, 3, 3))
+    for s in range(NUM_JOINTS):  # parents come first
+        p = PARENTS[s]
+        if s not in found:
+            glob[:, s] = np.eye(3) if p < 0 else glob[:, p]
+            align[s] = np.eye(3) if p < 0 else align[p]
+            continue
+        b = found[s]
+        if p >= 0 and len(_CHILDREN[p]) > 1 and PARENTS[p] >= 0 and p in found and \
+                np.linalg.norm(ref_pos[b] - ref_pos[found[p]]) <= eps:
+            # The BVH joint sits on its parent's, where the SMPL joint branches off to the side
+            # (CMU's clavicle starts mid-chest, SMPL's collar beside the neck): the two bones
+            # start at different places, so their directions are not compared; the joint keeps
+            # its BVH rotation relative to the reference posture.
+            align[s] = align[p]
+            glob[:, s] = delta[:, b] @ align[s]
+            continue
+        ends = [d for c in _CHILDREN[s] for d in targets(s, c)]
+        smpl_dirs = _unit(smpl_joints[ends] - smpl_joints[s])
+        bvh_dirs = _unit(ref_pos[[found[d] for d in ends]] - ref_pos[b])
+        if not ends:
+            align[s] = np.eye(3) if p < 0 else align[p]
+        elif len(ends) == 1:
+            align[s] = _swing(smpl_dirs[0], bvh_dirs[0])
+        else:
+            align[s] = Rotation.align_vectors(bvh_dirs, smpl_dirs)[0].as_matrix()
+        g = delta[:, b] @ align[s]
+        if len(ends) == 1:
+            now = _unit(pos[:, found[ends[0]]] - pos[:, b])  # (T, 3)
+            g = _swing(g @ smpl_dirs[0], now) @ g
+        glob[:, s] = g
+    return glob
+
+
+def _unit(v: np.ndarray) -> np.ndarray:
+    """(..., 3) vectors scaled to length 1 (zero vectors stay zero)."""
+    norm = np.linalg.norm(v, axis=-1, keepdims=True)
+    return v / np.where(norm > 0, norm, 1.0)
+
+
+def _swing(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) the smallest rotation taking unit vectors ``a`` onto ``b`` (..., 3)."""
+    a, b = np.broadcast_arrays(a, b)
+    v = np.cross(a, b)
+    c = np.sum(a * b, axis=-1)
+    k = np.zeros(a.shape[:-1] + (3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    k -= np.swapaxes(k, -1, -2)
+    opposite = c < -1.0 + 1e-9
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.eye(3) + k + (k @ k) / np.where(opposite, 1.0, 1.0 + c)[..., None, None]
+    if np.any(opposite):  # a half turn about any axis perpendicular to a
+        aa = a[opposite]
+        helper = np.eye(3)[np.argmin(np.abs(aa), axis=-1)]
+        u = _unit(np.cross(aa, helper))
+        r[opposite] = 2.0 * u[..., :, None] * u[..., None, :] - np.eye(3)
+    return r
+
+
+def detect_up_axis(bvh: Bvh, mapping: Mapping[str, str] | None = None) -> str:
+    """The file's up axis, ``"Y"`` or ``"Z"``, from its rest skeleton.
+
+    Up is the axis along which the rest skeleton runs from its feet (its lowest mapped
+    leg joints) to its head (or highest mapped spine joint); without mapped joints, the
+    axis along which the root's descendants reach farthest above and below it.
+
+    Raises:
+        BvhError: the skeleton stands along X, or upside down.
+    """
+    found = _resolve_mapping(bvh, mapping)
+    _, pos = bvh_forward_kinematics(bvh, rest=True)
+    pos = pos[0]
+    top = next((found[j] for j in (15, 12, 9, 6, 3) if j in found), None)
+    feet = [found[j] for j in (10, 11, 7, 8, 4, 5) if j in found]
+    if top is None or not feet:
+        span = np.ptp(pos, axis=0)
+        axis = int(np.argmax(span[1:])) + 1
+        direction = 1.0
+    else:
+        v = pos[top] - pos[feet].mean(axis=0)
+        axis = int(np.argmax(np.abs(v)))
+        direction = float(np.sign(v[axis]))
+    if axis == 0 or direction < 0:
+        raise BvhError(f"{bvh.source}: the rest skeleton stands along {'-' if direction < 0 else '+'}"
+                       f"{_AXES[axis]}; only Y-up and Z-up files are read")
+    return _AXES[axis]
 
 
 def _check_t_pose(bvh: Bvh, found: dict[int, int], conv: np.ndarray, ref_pos: np.ndarray) -> None:

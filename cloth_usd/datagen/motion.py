@@ -109,9 +109,10 @@ def resample(poses: np.ndarray, root: np.ndarray, src_fps: float, dst_fps: float
     n_src = poses.shape[0]
     if n_src == 0:
         raise ArgumentError("cannot resample an empty sequence")
-    if src_fps == dst_fps or n_src == 1:
+    if abs(src_fps - dst_fps) <= 1e-5 * dst_fps or n_src == 1:  # BVH frame times are rounded (0.0333333)
         return poses.copy(), root.copy()
-    n_dst = int(np.floor((n_src - 1) * dst_fps / src_fps + 1e-9)) + 1
+    # the same rounding may leave the last frame a hair short of a whole output frame
+    n_dst = int(np.floor((n_src - 1) * dst_fps / src_fps + 1e-3)) + 1
     t_src = np.arange(n_src) / src_fps
     t_dst = np.minimum(np.arange(n_dst) / dst_fps, t_src[-1])
     out = np.empty((n_dst, 24, 3))

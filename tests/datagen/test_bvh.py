@@ -11,7 +11,8 @@ from scipy.spatial.transform import Rotation
 from bvh_fixture import FRAME_TIME, JOINTS, NAMES, NUM_FRAMES, PATH, SMPL_OF, angles_deg, order, root_position_cm
 from cloth_usd.core.smpl import JOINT_NAMES
 from cloth_usd.datagen.bvh import (
-    DEFAULT_BVH_MAPPING, BvhError, detect_scale, load_bvh, parse_bvh, read_bvh, retarget_bvh,
+    DEFAULT_BVH_MAPPING, BvhError, detect_rig, detect_scale, detect_up_axis, load_bvh, parse_bvh, read_bvh,
+    retarget_bvh, rig_mapping,
 )
 from cloth_usd.errors import ArgumentError, ClothUsdError
 
@@ -88,7 +89,7 @@ def test_unreadable_file(tmp_path):
 
 # --------------------------------------------------------------------------- retargeting
 def test_retargeting_recovers_the_fixture_rotations():
-    poses, root = load_bvh(PATH, blend_seconds=0.0)
+    poses, root = load_bvh(PATH, blend_seconds=0.0, align_rest=False)
     assert poses.shape == (NUM_FRAMES, 72) and root.shape == (NUM_FRAMES, 3)
     for j, row in enumerate(JOINTS):
         smpl = SMPL_OF[row[0]]
@@ -109,7 +110,7 @@ def test_channel_orders_give_the_same_rotation():
         order = "".join(c[0] for c in chans.split())
         angles = arm.as_euler(order, degrees=True)
         text = _tiny_bvh(chans, root_rows=[(0, 0, 0)], arm_rows=[angles])
-        poses, _ = retarget_bvh(parse_bvh(text), scale=1.0, blend_seconds=0)
+        poses, _ = retarget_bvh(parse_bvh(text), scale=1.0, blend_seconds=0, align_rest=False)
         results.append(poses[0, 16 * 3:17 * 3])
     for r in results:
         assert _rotvec_close(r, arm.as_rotvec())
@@ -134,7 +135,7 @@ def test_scale_and_up_axis_conversion():
     text = "\n".join(lines[:-1] + [" ".join(frame)]) + "\n"
     bvh = parse_bvh(text)
     assert detect_scale(bvh) == pytest.approx(0.0254)
-    poses, root = retarget_bvh(bvh, up_axis="Z", blend_seconds=0)
+    poses, root = retarget_bvh(bvh, up_axis="Z", blend_seconds=0, align_rest=False)
     assert np.allclose(root[1], np.array([10, 30, -20]) * 0.0254)
     assert _rotvec_close(poses[1, :3], [0, np.deg2rad(yaw), 0])  # a turn about SMPL's Y
     assert np.allclose(poses[:, 3:], 0.0, atol=TOL)  # the T-pose maps to the rest pose
@@ -158,9 +159,10 @@ def test_reference_frame_takes_a_t_pose_from_the_motion(caplog):
     assert text.count(forearm + "0.26 0 0") == 1
     text = text.replace(forearm + "0.26 0 0", forearm + "%g %g 0" % tuple(bent.apply([0.26, 0, 0])[:2]))
     with caplog.at_level(logging.WARNING):
-        retarget_bvh(parse_bvh(text), scale=1.0, blend_seconds=0)
+        retarget_bvh(parse_bvh(text), scale=1.0, blend_seconds=0, align_rest=False)
     assert "T-pose" in caplog.text
-    poses, _ = retarget_bvh(parse_bvh(text), scale=1.0, blend_seconds=0, reference_frame=0)
+    poses, _ = retarget_bvh(parse_bvh(text), scale=1.0, blend_seconds=0, reference_frame=0,
+                            align_rest=False)
     assert np.allclose(poses[0], 0.0, atol=TOL)
     assert _rotvec_close(poses[1, 16 * 3:17 * 3], lift.as_rotvec())
 
@@ -208,3 +210,53 @@ def test_default_mapping_covers_common_names():
                        ("LeftForeArm", "left_elbow"), ("LeftHand", "left_wrist"), ("RightArm", "right_shoulder"),
                        ("rShldr", "right_shoulder"), ("RightToeBase", "right_foot")]:
         assert DEFAULT_BVH_MAPPING[name.lower()] == smpl, name
+
+
+# --------------------------------------------------------------------------- rest alignment
+def _smpl_bone_dirs(poses: np.ndarray, a: str, b: str) -> np.ndarray:
+    """(T, 3) unit direction of SMPL's bone a -> b under ``poses``, on the embedded mean body."""
+    from cloth_usd.core.body import joint_transforms, load_body_model, shape_body
+    from cloth_usd.core.rotations import axis_angle_to_matrix
+
+    joints = shape_body(load_body_model(), np.zeros(1))[1]
+    pos = joint_transforms(axis_angle_to_matrix(poses.reshape(-1, 24, 3)), joints)[0]
+    v = pos[:, JOINT_NAMES.index(b)] - pos[:, JOINT_NAMES.index(a)]
+    return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+def test_an_arms_down_rest_puts_the_arms_where_the_file_has_them():
+    # The rest posture hangs the left arm 80 deg down; frame 1 lifts it 30 deg, frame 2 swings it forward.
+    down = Rotation.from_euler("Z", -80, degrees=True)
+    frames = [Rotation.identity(), Rotation.from_euler("Z", 30, degrees=True),
+              Rotation.from_euler("Y", -50, degrees=True)]
+    text = _tiny_bvh("Xrotation Yrotation Zrotation", root_rows=[(0, 0, 0)] * 3,
+                     arm_rows=[r.as_euler("XYZ", degrees=True) for r in frames])
+    forearm = "JOINT LeftForeArm\n{\nOFFSET "
+    assert text.count(forearm + "0.26 0 0") == 1
+    text = text.replace(forearm + "0.26 0 0", forearm + "%g %g %g" % tuple(down.apply([0.26, 0, 0])))
+    bvh = parse_bvh(text)
+    poses, _ = retarget_bvh(bvh, scale=1.0, blend_seconds=0, up_axis=None)
+    got = _smpl_bone_dirs(poses, "left_shoulder", "left_elbow")
+    want = np.array([(r * down).apply([1.0, 0, 0]) for r in frames])  # in SMPL's (Y-up) axes
+    assert np.degrees(np.arccos(np.clip(np.sum(got * want, axis=-1), -1, 1))).max() < 1e-4
+    # the older rule reads the rest as a T-pose: the arm stays 80 deg off
+    old, _ = retarget_bvh(bvh, scale=1.0, blend_seconds=0, align_rest=False)
+    off = np.degrees(np.arccos(np.sum(_smpl_bone_dirs(old, "left_shoulder", "left_elbow")[0] * want[0])))
+    assert off > 60
+
+
+@pytest.mark.parametrize("up", ["Y", "Z"])
+def test_up_axis_detection(up):
+    assert detect_up_axis(parse_bvh(_tiny_bvh(up=up))) == up
+    lying = _tiny_bvh().replace("OFFSET 0 0.6 0", "OFFSET 0.6 0 0")  # the head along +X: neither
+    with pytest.raises(BvhError, match=r"stands along \+X"):
+        detect_up_axis(parse_bvh(lying, source="lying.bvh"))
+
+
+def test_rigs_are_told_apart():
+    assert detect_rig(read_bvh(PATH)) == "mixamo"
+    assert detect_rig(parse_bvh(_tiny_bvh())) is None  # no Spine2, no signature of any rig
+    rig, table = rig_mapping(parse_bvh(_tiny_bvh()), {"Head": "neck"})
+    assert rig is None and table == {"Head": "neck"}
+    rig, table = rig_mapping(read_bvh(PATH), {"Head": "neck"})
+    assert rig == "mixamo" and table["Head"] == "neck" and "Neck" not in table

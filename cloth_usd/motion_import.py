@@ -1,0 +1,392 @@
+"""Bring your own motion: a BVH or AMASS file as a new USD shot with an SMPL character.
+
+:func:`import_motion` retargets the file onto SMPL (:mod:`cloth_usd.datagen.bvh`,
+:mod:`cloth_usd.datagen.amass`) and writes a new stage as the scene contract asks
+(docs/scene_contract.md): a SkelRoot ``/Character`` with the Skeleton
+``/Character/Skeleton`` (SMPL's 24 joints and hierarchy, rest = the T-pose of the body
+shaped by the betas, ``smpl:betas``, ``smpl:gender``), its SkelAnimation
+``/Character/Skeleton/Motion`` and, for each garment file, the garment Mesh referenced
+under ``/Character`` with ``cloth:body`` bound to the Skeleton, so that ``cloth-usd
+bake`` bakes the shot as it is. The stage is Y up, in metres, at ``fps`` frames per
+second, time codes ``start, start + 1, ...``.
+
+Shape letters: T frames.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+import tempfile
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .core.smpl import JOINT_NAMES, NUM_BETAS
+from .errors import ArgumentError, GarmentError, MotionFileError, OutputWriteError, SceneError
+
+__all__ = ["DEFAULT_FPS", "DEFAULT_START", "ImportResult", "import_motion", "parse_betas", "parse_source_frames"]
+
+log = logging.getLogger(__name__)
+
+#: Frame rate of an imported shot unless ``fps`` says otherwise [1/s]. Mocap is usually
+#: captured at 120 fps (CMU, AMASS); a shot at 30 fps bakes four times fewer frames and
+#: the garment motion does not need more.
+DEFAULT_FPS = 30.0
+#: First time code of an imported shot, as in the samples.
+DEFAULT_START = 1001.0
+#: The skeleton and its SkelRoot.
+SKELETON_PATH = "/Character/Skeleton"
+
+_SUFFIXES = (".bvh", ".npz")
+_GENDERS = ("neutral", "female", "male")
+
+
+@dataclass(frozen=True)
+class ImportResult:
+    """What :func:`import_motion` wrote."""
+
+    output: Path
+    """The stage written."""
+    rig: str
+    """How the motion was read: a BVH rig (``cmu-mb``, ``cmu-daz``, ``mixamo``, ``smpl``,
+    ``joint map``, or ``<rig> + joint map``) or ``amass``."""
+    source_frames: tuple[int, int]
+    """The file's frames used, first and last (0-based, inclusive), at its own rate."""
+    frames: int
+    """Frames (time codes) written."""
+    fps: float
+    """Frames per second of the stage [1/s]."""
+    start: float
+    """First time code."""
+    betas: np.ndarray
+    """(10,) float64 shape coefficients authored as ``smpl:betas``."""
+    gender: str
+    """``smpl:gender``."""
+    garments: tuple[str, ...]
+    """Prim paths of the referenced garments."""
+
+
+# ------------------------------------------------------------------------- parsing
+def parse_betas(text: str) -> np.ndarray:
+    """``"B0,B1,..."`` -> (10,) float64 (fewer are padded with zeros).
+
+    Raises:
+        ArgumentError: not comma-separated finite numbers, or more than 10.
+    """
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise ArgumentError(f"--betas {text!r}: expected comma-separated numbers, e.g. 0.6,-0.4,0.2") from None
+    return _check_betas(values, f"--betas {text!r}")
+
+
+def parse_source_frames(text: str) -> tuple[int, int]:
+    """``"A:B"`` -> (A, B), the file's frames A..B (0-based, inclusive).
+
+    Raises:
+        ArgumentError: not two non-negative integers with A <= B.
+    """
+    m = re.fullmatch(r"\s*(\d+)\s*:\s*(\d+)\s*", text)
+    if m is None or int(m.group(1)) > int(m.group(2)):
+        raise ArgumentError(f"--frames {text!r}: expected A:B, the file's frames A to B (0-based, both "
+                            "included, A <= B), e.g. 0:299")
+    return int(m.group(1)), int(m.group(2))
+
+
+def _check_betas(values, where: str) -> np.ndarray:
+    arr = np.asarray(values, dtype=np.float64).reshape(-1)
+    if arr.size > NUM_BETAS or not np.all(np.isfinite(arr)):
+        raise ArgumentError(f"{where}: expected at most {NUM_BETAS} finite shape coefficients, got {arr.size}")
+    return np.pad(arr, (0, NUM_BETAS - arr.size))
+
+
+# ------------------------------------------------------------------------- import
+def import_motion(
+    source: str | os.PathLike,
+    output: str | os.PathLike,
+    *,
+    garments: Sequence[str | os.PathLike] = (),
+    betas: Sequence[float] | np.ndarray | None = None,
+    gender: str | None = None,
+    fps: float | None = None,
+    frames: tuple[int, int] | str | None = None,
+    joint_map: str | os.PathLike | dict[str, str] | None = None,
+    force: bool = False,
+    start: float = DEFAULT_START,
+    body_model: str | os.PathLike | None = None,
+) -> ImportResult:
+    """Write a new shot holding an SMPL character that performs ``source``.
+
+    Args:
+        source: a BVH file (rigs of :data:`cloth_usd.datagen.bvh.BVH_RIGS`, or any rig
+            with ``joint_map``) or an AMASS-style ``.npz`` (``poses``, ``trans``,
+            ``mocap_framerate``, optionally ``betas`` and ``gender``).
+        output: the stage to write (``.usda``, ``.usdc`` or ``.usd``); written to a
+            temporary file beside it and renamed into place.
+        garments: USD files each holding garment Meshes (``cloth:category``); each is
+            referenced under ``/Character`` and bound to the skeleton. A garment must
+            have been made for the body these betas give (its points are the garment
+            worn at rest).
+        betas: (<= 10,) shape coefficients; None takes the AMASS file's, else the
+            betas of the garments' own skeletons (which must agree), else zeros.
+        gender: ``neutral``, ``female`` or ``male``; None takes the AMASS file's, else
+            ``neutral``. It picks the body model when ``body_model`` is a folder.
+        fps: the stage's frame rate [1/s]; None is :data:`DEFAULT_FPS`. The motion is
+            resampled (slerp per joint).
+        frames: the file's frames to use, ``(A, B)`` or ``"A:B"`` (0-based, inclusive,
+            at the file's rate); None uses all of them, except the synthetic T-pose
+            that CMU's cgspeed conversions (``cmu-mb``, ``cmu-daz``) put in frame 0.
+        joint_map: ``{BVH joint: SMPL joint}`` (a JSON/TOML file or a dict); its
+            entries replace the rig's for the same SMPL joints.
+        force: replace an existing ``output``.
+        start: the first time code.
+        body_model: SMPL-format file or folder for the rest joints; None is embedded.
+
+    Raises:
+        MotionFileError: the file is missing or malformed, its rig is unknown and no
+            joint map is given, or a needed joint is missing (the message names both).
+        OutputExistsError: ``output`` exists and ``force`` is false.
+        ArgumentError, GarmentError: a bad argument or garment file.
+    """
+    from .core.body import load_body_model, shape_body
+    from .datagen.motion import resample
+    from .usd.write import check_output_path
+
+    source = Path(source)
+    if source.suffix.lower() not in _SUFFIXES:
+        raise ArgumentError(f"{source}: unknown motion file type {source.suffix!r}; valid: .bvh (BVH) and "
+                            ".npz (AMASS)")
+    if not source.is_file():
+        raise MotionFileError(f"{source}: no such motion file")
+    output = check_output_path(output, force=force)
+    if fps is not None and not (np.isfinite(fps) and fps > 0):
+        raise ArgumentError(f"--fps {fps}: must be a positive number of frames per second")
+    out_fps = DEFAULT_FPS if fps is None else float(fps)
+    if isinstance(frames, str):
+        frames = parse_source_frames(frames)
+    if gender is not None and gender not in _GENDERS:
+        raise ArgumentError(f"gender {gender!r}: valid values are {', '.join(_GENDERS)}")
+    sources = [_garment_source(Path(g)) for g in garments]
+
+    is_bvh = source.suffix.lower() == ".bvh"
+    file_betas, file_gender = (None, None) if is_bvh else _amass_shape(source)
+    if betas is not None:
+        shape = _check_betas(betas, "betas")
+    elif file_betas is not None:
+        shape = file_betas
+    else:
+        shape = _garment_betas(sources)
+    gender = gender or file_gender or "neutral"
+    joints = shape_body(load_body_model(body_model, gender=gender), shape)[1]
+
+    if is_bvh:
+        poses, root, rig, used = _bvh_motion(source, joints, out_fps, frames, joint_map)
+    else:
+        poses, root, rate, used = _amass_motion(source, frames)
+        poses, root = resample(poses, root, rate, out_fps)
+        rig = "amass"
+    times = float(start) + np.arange(len(poses), dtype=np.float64)
+    paths = _write_stage(output, source, rig, used, poses, joints[0] + root, times, out_fps, shape, gender,
+                         joints, sources)
+    log.info("%s: %s, file frames %d:%d -> %d frames at %g fps in %s", source, rig, used[0], used[1],
+             len(times), out_fps, output)
+    return ImportResult(output=output, rig=rig, source_frames=used, frames=len(times), fps=out_fps,
+                        start=float(start), betas=shape, gender=gender, garments=paths)
+
+
+def _bvh_motion(source: Path, joints: np.ndarray, fps: float, frames: tuple[int, int] | None, joint_map
+                ) -> tuple[np.ndarray, np.ndarray, str, tuple[int, int]]:
+    """Poses (T, 72) [rad], root offsets (T, 3) [m], the rig's name and the frames used."""
+    from .core.joint_names import as_joint_map
+    from .datagen.bvh import BVH_RIGS, read_bvh, retarget_bvh, rig_mapping, trim_bvh
+
+    bvh = read_bvh(source)
+    user = as_joint_map(joint_map)
+    entries = None if user is None else {k: JOINT_NAMES[v] for k, v in user.entries.items()}
+    rig, mapping = rig_mapping(bvh, entries)
+    if not mapping:
+        raise MotionFileError(f"{source}: its joints ({', '.join(bvh.names[:8])}, ...) follow no known BVH rig "
+                              f"(known: {', '.join(BVH_RIGS)}); pass --joint-map FILE, a JSON object "
+                              "{\"bvh joint\": \"SMPL joint\"}")
+    name = rig if user is None else ("joint map" if rig is None else f"{rig} + joint map")
+    if bvh.num_frames == 0:
+        raise MotionFileError(f"{source}: the file has no frames")
+    if frames is None:
+        frames = (1 if _synthetic_first_frame(bvh, rig) else 0, bvh.num_frames - 1)
+    elif frames[1] >= bvh.num_frames:
+        raise ArgumentError(f"--frames {frames[0]}:{frames[1]}: {source} has frames 0:{bvh.num_frames - 1}")
+    bvh = trim_bvh(bvh, *frames)
+    poses, root = retarget_bvh(bvh, mapping=mapping, fps=fps, up_axis=None, blend_seconds=0.0,
+                               smpl_joints=joints)
+    return poses, root, name, frames
+
+
+def _synthetic_first_frame(bvh, rig: str | None) -> bool:
+    """True for a CMU conversion by cgspeed whose frame 0 is the T-pose it prepends to every
+    take (the root unturned, every joint near its rest), not captured motion."""
+    if rig not in ("cmu-mb", "cmu-daz") or bvh.num_frames < 2:
+        return False
+    root = [k for k, c in enumerate(bvh.channels[0]) if c.endswith("rotation")]
+    return bool(np.all(bvh.motion[0, root] == 0.0) and np.abs(bvh.motion[0, len(bvh.channels[0]):]).max() < 30.0)
+
+
+def _amass_shape(source: Path) -> tuple[np.ndarray | None, str | None]:
+    """The betas (10,) and gender an AMASS file holds, None where it holds none."""
+    from .datagen.amass import load_amass_betas
+
+    with np.load(source, allow_pickle=False) as npz:
+        names = set(npz.files)
+        gender = None
+        if "gender" in names:
+            try:
+                raw = npz["gender"]
+            except ValueError:  # a pickled object array
+                raw = None
+            if raw is not None and raw.dtype.kind in "SU" and raw.size == 1:
+                value = raw.reshape(-1)[0]
+                value = (value.decode() if isinstance(value, bytes) else str(value)).strip().lower()
+                if value not in _GENDERS:
+                    raise MotionFileError(f"{source}: key 'gender' is {value!r}; valid: {', '.join(_GENDERS)}")
+                gender = value
+    betas = load_amass_betas(source) if "betas" in names else None
+    return betas, gender
+
+
+def _amass_motion(source: Path, frames: tuple[int, int] | None
+                  ) -> tuple[np.ndarray, np.ndarray, float, tuple[int, int]]:
+    """Poses (T, 72) [rad] and root offsets (T, 3) [m] at the file's rate, that rate and the frames used."""
+    from .datagen.amass import load_amass
+
+    poses, root = load_amass(source, blend_seconds=0.0)
+    with np.load(source, allow_pickle=False) as npz:
+        key = next(k for k in ("mocap_framerate", "mocap_frame_rate") if k in npz.files)
+        rate = float(np.asarray(npz[key]).reshape(-1)[0])
+    if frames is None:
+        frames = (0, len(poses) - 1)
+    elif frames[1] >= len(poses):
+        raise ArgumentError(f"--frames {frames[0]}:{frames[1]}: {source} has frames 0:{len(poses) - 1}")
+    a, b = frames
+    return poses[a:b + 1], root[a:b + 1] - root[a], rate, frames
+
+
+# ------------------------------------------------------------------------- garments
+@dataclass(frozen=True)
+class _GarmentSource:
+    file: Path
+    prim_paths: tuple[str, ...]
+    """Garment Mesh prims in ``file``."""
+    to_internal: tuple[np.ndarray, ...]
+    """(4, 4) per prim: its parent's space -> the internal frame (column convention)."""
+    betas: tuple[np.ndarray | None, ...]
+    """Per prim: ``smpl:betas`` of its ``cloth:body`` skeleton in ``file``, None if unauthored."""
+
+
+def _garment_source(path: Path) -> _GarmentSource:
+    from pxr import Usd, UsdGeom
+
+    from .usd.read import open_stage, stage_to_internal
+
+    if not path.is_file():
+        raise ArgumentError(f"--garment {path}: no such file")
+    try:
+        stage = open_stage(path)
+    except SceneError as exc:
+        raise GarmentError(f"--garment {path}: {exc}") from None
+    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh) and p.HasAttribute("cloth:category")]
+    default = stage.GetDefaultPrim()
+    chosen = [default] if default and default in meshes else meshes
+    if not chosen:
+        raise GarmentError(f"--garment {path}: holds no garment (a Mesh with a cloth:category attribute, "
+                           "e.g. one written by cloth_usd.usd.author.author_garment)")
+    cache = UsdGeom.XformCache(Usd.TimeCode.EarliestTime())
+    s2i = stage_to_internal(stage)
+    to_internal, betas = [], []
+    for prim in chosen:
+        parent = prim.GetParent()
+        world = np.eye(4) if parent.IsPseudoRoot() else np.array(cache.GetLocalToWorldTransform(parent)).T
+        to_internal.append(s2i @ world)
+        betas.append(_body_betas(stage, prim))
+    return _GarmentSource(file=path, prim_paths=tuple(str(p.GetPath()) for p in chosen),
+                          to_internal=tuple(to_internal), betas=tuple(betas))
+
+
+def _body_betas(stage, prim) -> np.ndarray | None:
+    rel = prim.GetRelationship("cloth:body")
+    targets = rel.GetTargets() if rel else []
+    body = stage.GetPrimAtPath(targets[0]) if len(targets) == 1 else None
+    attr = body.GetAttribute("smpl:betas") if body else None
+    value = attr.Get() if attr and attr.HasAuthoredValue() else None
+    return None if value is None else _check_betas(list(value), f"{body.GetPath()}.smpl:betas")
+
+
+def _garment_betas(sources: Sequence[_GarmentSource]) -> np.ndarray:
+    """The betas the garments were made for (they must agree), or zeros."""
+    found = [(s.file, b) for s in sources for b in s.betas if b is not None]
+    for file, b in found[1:]:
+        if not np.allclose(b, found[0][1], atol=1e-6):
+            raise ArgumentError(f"--garment {found[0][0]} and {file} were made for different bodies "
+                                "(their skeletons' smpl:betas differ); pass --betas")
+    if found:
+        log.info("betas %s from the garments' skeleton", np.round(found[0][1], 3).tolist())
+        return found[0][1]
+    return np.zeros(NUM_BETAS)
+
+
+# ------------------------------------------------------------------------- writing
+def _write_stage(output: Path, source: Path, rig: str, used: tuple[int, int], poses: np.ndarray,
+                 root_positions: np.ndarray, times: np.ndarray, fps: float, betas: np.ndarray, gender: str,
+                 joints: np.ndarray, sources: Sequence[_GarmentSource]) -> tuple[str, ...]:
+    """Author the shot in memory and write it atomically; returns the garments' prim paths."""
+    from pxr import Gf, Sdf, Usd, UsdGeom
+
+    from .usd.author import author_skeleton, set_stage_metadata
+
+    stage = Usd.Stage.CreateInMemory()
+    set_stage_metadata(stage, up_axis="Y", meters_per_unit=1.0, fps=fps, start=times[0], end=times[-1])
+    skel = author_skeleton(stage, SKELETON_PATH, joint_positions=joints, betas=betas, gender=gender,
+                           poses=poses, root_positions=root_positions, times=times)
+    stage.SetDefaultPrim(stage.GetPrimAtPath("/Character"))
+    taken = {"Skeleton"}
+    placed: list[str] = []
+    for src in sources:
+        asset = os.path.relpath(src.file.resolve(), output.resolve().parent).replace(os.sep, "/")
+        for prim_path, to_internal in zip(src.prim_paths, src.to_internal):
+            name = _unique(Sdf.Path(prim_path).name, taken)
+            parent = Sdf.Path("/Character")
+            if not np.allclose(to_internal, np.eye(4), atol=1e-9):  # the garment's units or axes differ
+                xf = UsdGeom.Xform.Define(stage, parent.AppendChild(name + "_space"))
+                xf.MakeMatrixXform().Set(Gf.Matrix4d(to_internal.T.tolist()))
+                parent = xf.GetPath()
+            prim = stage.DefinePrim(parent.AppendChild(name))
+            prim.GetReferences().AddReference(asset, Sdf.Path(prim_path))
+            prim.CreateRelationship("cloth:body", custom=True).SetTargets([Sdf.Path(skel)])
+            placed.append(str(prim.GetPath()))
+    layer = stage.GetRootLayer()
+    layer.customLayerData = {"cloth_usd": {
+        "tool_version": __version__, "imported_from": source.name, "rig": rig,
+        "source_frames": f"{used[0]}:{used[1]}",
+    }}
+    fd, tmp = tempfile.mkstemp(prefix=f".{output.stem}.", suffix=f".tmp{output.suffix}", dir=output.parent)
+    os.close(fd)
+    try:
+        if not layer.Export(tmp):
+            raise OutputWriteError(f"{output}: USD could not write the stage (to {tmp}); check the folder's "
+                                   "permissions and free space")
+        os.replace(tmp, output)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return tuple(placed)
+
+
+def _unique(name: str, taken: set[str]) -> str:
+    out, k = name, 1
+    while out in taken or out + "_space" in taken:
+        out, k = f"{name}_{k}", k + 1
+    taken.add(out)
+    return out
