@@ -102,7 +102,7 @@ def _parser() -> argparse.ArgumentParser:
                     help="data set folder (cloth-usd datagen); with --objective physics, a datagen config file "
                          "whose garments, bodies and motions are trained on without simulating them")
     tr.add_argument("--objective", choices=["supervised", "physics"],
-                    help="supervised (simulated data) or physics (the garment's energy; coarse only); "
+                    help="supervised (simulated data) or physics (the garment's energy, no simulation); "
                          "overrides the config's"),
     tr.add_argument("-o", "--out", required=True, help="run folder: checkpoints, history.csv, curve.png")
     tr.add_argument("--config", help="training config (.json or .toml; see cloth_usd.nn.train.TrainConfig)")
@@ -286,11 +286,10 @@ def _train(args: argparse.Namespace) -> int:
     if physics:
         from .nn.physics_train import train_physics
 
-        if args.tier != "coarse" or coarse_run or args.resume:
-            raise ArgumentError("--objective physics: trains the coarse tier, from the start (no --coarse-run, "
-                                "no --resume yet)")
-        result = train_physics(args.data, args.out, config, device=args.device, body=_body(args.body_model),
-                               progress=show)
+        if args.resume:
+            raise ArgumentError("--objective physics: --resume is not supported yet; train into a new --out")
+        result = train_physics(args.data, args.out, config, tier=args.tier, coarse_run=coarse_run,
+                               device=args.device, body=_body(args.body_model), progress=show)
     else:
         result = train(args.tier, args.data, args.out, config, coarse_run=coarse_run, device=args.device,
                        resume=args.resume, body=_body(args.body_model), progress=show)

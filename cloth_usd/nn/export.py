@@ -177,8 +177,9 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         from ..core.body import load_body_model
         from .physics_train import PHYSICS_FIT, physics_set
 
-        if detail is not None:
-            raise ArgumentError(f"--detail-run {detail_run}: a physics-trained coarse run ships alone for now")
+        if detail is not None and detail.info["data"].get("kind") != "physics":
+            raise ArgumentError(f"--detail-run {detail_run}: trained on simulated data, the coarse run on physics; "
+                                "a bundle's two runs share their data")
         body = body if body is not None else load_body_model()
         data = physics_set(data_dir, body, heading=coarse.config.heading, splits=(Split.VAL,),
                            max_frames=parity_frames)

@@ -1,4 +1,4 @@
-"""Training the coarse generator on the garment's own physics: no simulated data.
+"""Training the generators on the garment's own physics: no simulated data.
 
 The objective is the garment's energy (:mod:`cloth_usd.nn.physics`) at the model's
 output, quasi-static: membrane strain against the rest garment, bending against its
@@ -13,11 +13,13 @@ and splits, planned but never simulated. The fit attribute's factor analysis is 
 its training pairs, as the factory does, and saved in the run folder.
 
 The coarse model is made smooth by a stiffer bending (``TrainConfig.bending_scale``):
-the coarse tier should drape, not wrinkle; the detail tier's physics objective (the
-material as it is) is still to come. The run folder has the supervised runs' layout
+the coarse tier should drape, not wrinkle. The detail model (parser included) then
+minimises the energy of the material as it is (``bending_scale`` 1) starting from the
+coarse model's garment ``M_coarse``, which it sees as the runtime makes it. The run folder has the supervised runs' layout
 (``run.json``, ``best.pt``, ``history.csv``, ``curve.png``), so ``load_run`` reads it; its
-losses are energies [J], relative to the skinned garment's (below 0: the model found a
-state of lower energy than skinning). Shape letters: B frames, N garment vertices.
+losses are energies [J]; validation is relative to the base garment's (the skinned one for
+the coarse tier, ``M_coarse`` for the detail tier; below 0: the model found a state of
+lower energy). Shape letters: B frames, N garment vertices.
 """
 
 from __future__ import annotations
@@ -37,13 +39,14 @@ import torch
 from ..core.body import BodyModel, load_body_model
 from ..core.fit import FitModel
 from ..core.heading import Heading, heading_frame
-from ..core.pipeline import CoarseBase, GarmentPair, coarse_base_points, coarse_model_features, pose_body, prepare_pair
+from ..core.pipeline import (CoarseBase, GarmentPair, coarse_base_points, coarse_model_features, detail_model_inputs,
+                             pose_body, prepare_pair)
 from ..core.scene import Tier
 from ..errors import ArgumentError, ClothUsdError
 from .data import Moments, Split, plan_batches
 from .physics import GarmentRest, Material, garment_energy, garment_rest
 from .train import (BEST, CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, TrainConfig, TrainResult,
-                    _atomic_save, _atomic_text, _coarse_forward, _rng_state, _Tensors, _write_history, build_model,
+                    _atomic_save, _atomic_text, _coarse_forward, _detail_forward, _rng_state, _Tensors, _write_history, build_model,
                     plot_history)
 
 __all__ = ["PhysicsClip", "PhysicsSet", "physics_set", "train_physics", "PHYSICS_FIT", "OUTPUT_SCALE"]
@@ -144,41 +147,80 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
     return PhysicsSet(config_sha256=file_sha256(config_path), fit=fit, material=material, clips=tuple(clips))
 
 
-def _frames(body: BodyModel, clip: PhysicsClip, frames: np.ndarray, base: CoarseBase):
-    """Coarse features, the coarse base and the contact planes of ``frames`` of ``clip``."""
-    poses, transl = clip.poses[frames], clip.transl[frames]
-    posed = pose_body(body, clip.pair, poses, transl)
-    feats = coarse_model_features(clip.pair, posed, transl)
-    points = coarse_base_points(body, clip.pair, posed, poses, transl, base)
-    return feats, points, posed.garment_points, posed.garment_normals
+@dataclass(frozen=True)
+class _Inputs:
+    """A batch's model inputs and the garment its displacement is added to (numpy)."""
+
+    features: np.ndarray
+    """(B, N, F) node features."""
+    attributes: np.ndarray | None
+    """(B, 85) parser attributes (detail tier), else None."""
+    base: np.ndarray
+    """(B, N, 3) float64 [m]: the skinned garment (coarse) or ``M_coarse`` (detail)."""
+    body_points: np.ndarray
+    """(B, N, 3) float64 [m] each garment vertex's associated posed body vertex."""
+    body_normals: np.ndarray
+    """(B, N, 3) float64 the body normals there."""
 
 
-def _energy(clip: PhysicsClip, x: torch.Tensor, body_points: np.ndarray, body_normals: np.ndarray,
-            material: Material) -> torch.Tensor:
+class _Tier:
+    """What one tier's physics training computes per batch, the model call included."""
+
+    def __init__(self, tier: Tier, body: BodyModel, base: CoarseBase, tensors: _Tensors, coarse_model=None) -> None:
+        self.tier, self.body, self.base, self.tensors, self.coarse_model = tier, body, base, tensors, coarse_model
+
+    def inputs(self, clip: PhysicsClip, frames: np.ndarray) -> _Inputs:
+        poses, transl = clip.poses[frames], clip.transl[frames]
+        posed = pose_body(self.body, clip.pair, poses, transl)
+        feats = coarse_model_features(clip.pair, posed, transl)
+        base = coarse_base_points(self.body, clip.pair, posed, poses, transl, self.base)
+        if self.tier is Tier.COARSE:
+            return _Inputs(feats, None, base, posed.garment_points, posed.garment_normals)
+        with torch.no_grad():  # the coarse model's M_coarse, as the runtime makes it (before the post-process)
+            m_coarse = base + _coarse_forward(self.coarse_model, feats, clip.pair.graph, self.tensors).cpu().numpy()
+        feats, attrs = detail_model_inputs(clip.pair, m_coarse, posed, poses, transl)
+        return _Inputs(feats, attrs, m_coarse, posed.garment_points, posed.garment_normals)
+
+    def forward(self, model, clip: PhysicsClip, inp: _Inputs) -> torch.Tensor:
+        """(B, N, 3) float64 the model's garment [m]."""
+        if inp.attributes is None:
+            delta = _coarse_forward(model, inp.features, clip.pair.graph, self.tensors)
+        else:
+            delta = _detail_forward(model, inp.features, inp.attributes, clip.pair.graph, self.tensors)
+        return torch.from_numpy(inp.base).to(delta.device) + delta.double()
+
+
+def _energy(clip: PhysicsClip, x: torch.Tensor, inp: _Inputs, material: Material) -> torch.Tensor:
     """(B,) the quasi-static energy [J] of garments ``x`` (B, N, 3)."""
-    return garment_energy(x, clip.rest, material, body_points=torch.from_numpy(body_points).to(x),
-                          body_normals=torch.from_numpy(body_normals).to(x)).total
+    return garment_energy(x, clip.rest, material, body_points=torch.from_numpy(inp.body_points).to(x),
+                          body_normals=torch.from_numpy(inp.body_normals).to(x)).total
 
 
-def _statistics(model, body: BodyModel, clips: Sequence[PhysicsClip], config: TrainConfig, base: CoarseBase) -> None:
+def _statistics(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainConfig) -> None:
     """Input statistics from the training frames, the fixed :data:`OUTPUT_SCALE`, and a start
     near the base: the last layers are shrunk so a fresh model moves the garment by about a
     millimetre, not by :data:`OUTPUT_SCALE` in random directions (which tears the membrane:
     hundreds of J against the skinned garment's few, a hole the optimiser climbs out of slowly)."""
-    feats = Moments(7)
+    feats, attrs = Moments(7 if step.tier is Tier.COARSE else 30), Moments(85)
     for k, frames in plan_batches(clips, config.batch, frames=config.stat_frames):
-        feats.add(_frames(body, clips[k], frames, base)[0])
+        inp = step.inputs(clips[k], frames)
+        feats.add(inp.features)
+        if inp.attributes is not None:
+            attrs.add(inp.attributes)
     model.set_statistics(torch.from_numpy(feats.mean), torch.from_numpy(feats.std),
                          torch.full((3,), OUTPUT_SCALE))
+    if step.tier is Tier.DETAIL:
+        model.set_attribute_statistics(torch.from_numpy(attrs.mean), torch.from_numpy(attrs.std))
     head = model.head.magnitude if model.head.magnitude is not None else model.head.direction
     with torch.no_grad():
         head[-1].weight.mul_(START_SHRINK)
         head[-1].bias.mul_(START_SHRINK)
 
 
-def _validate(model, tensors: _Tensors, body: BodyModel, clips: Sequence[PhysicsClip], config: TrainConfig,
-              material: Material, base: CoarseBase) -> tuple[float, float]:
-    """(mean energy relative to the skinned garment's [J], mean distance from skinning [mm])."""
+def _validate(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainConfig,
+              material: Material) -> tuple[float, float]:
+    """(mean energy relative to the base garment's [J], mean distance from it [mm]); the base is
+    the skinned garment (coarse tier) or the coarse model's (detail tier)."""
     if not clips:
         return math.nan, math.nan
     model.eval()
@@ -187,60 +229,76 @@ def _validate(model, tensors: _Tensors, body: BodyModel, clips: Sequence[Physics
     with torch.no_grad():
         for k, frames in plan_batches(clips, config.batch, frames=config.val_frames or None):
             clip = clips[k]
-            feats, points, bp, bn = _frames(body, clip, frames, base)
-            delta = _coarse_forward(model, feats, clip.pair.graph, tensors).double()
-            skinned = torch.from_numpy(points)
-            e = _energy(clip, skinned + delta, bp, bn, material) - _energy(clip, skinned, bp, bn, material)
-            rel += float(e.sum())
-            dist += float(torch.linalg.vector_norm(delta, dim=-1).sum())
+            inp = step.inputs(clip, frames)
+            x = step.forward(model, clip, inp).cpu()
+            base = torch.from_numpy(inp.base)
+            rel += float((_energy(clip, x, inp, material) - _energy(clip, base, inp, material)).sum())
+            dist += float(torch.linalg.vector_norm(x - base, dim=-1).sum())
             count += len(frames)
-            vertices += delta.shape[0] * delta.shape[1]
+            vertices += x.shape[0] * x.shape[1]
     return rel / count, dist / vertices * 1000.0
 
 
 def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainConfig = TrainConfig(
-        objective=Objective.PHYSICS, coarse_base=CoarseBase.SKINNED), *, device: str | None = "auto",
-        body: BodyModel | None = None, progress: Callable[[EpochRecord], None] | None = None) -> TrainResult:
-    """Train a coarse generator on the physics objective (see the module docstring).
+        objective=Objective.PHYSICS, coarse_base=CoarseBase.SKINNED), *, tier: Tier | str = Tier.COARSE,
+        coarse_run: str | Path | None = None, device: str | None = "auto", body: BodyModel | None = None,
+        progress: Callable[[EpochRecord], None] | None = None) -> TrainResult:
+    """Train a generator on the physics objective (see the module docstring).
 
     Args:
         config_path: the data set config whose pairs and motions it trains on.
         run_dir: the run folder to create.
-        config: ``objective`` must be ``physics``; ``bending_scale`` stiffens the bending.
+        config: ``objective`` must be ``physics``; ``bending_scale`` scales the bending
+            (10 for the coarse tier's drape; 1, the material's, for the detail tier).
+        tier: coarse, or detail on top of ``coarse_run`` (its predictions are ``M_coarse``;
+            the detail run takes its heading and coarse base).
+        coarse_run: the trained coarse run folder (detail only).
         device: torch device (auto: CUDA when available).
         progress: called after every epoch.
     Raises:
-        ArgumentError: a run exists in ``run_dir``, or the config has no training pairs.
+        ArgumentError: a run exists in ``run_dir``, the config has no training pairs, or
+            the tier and ``coarse_run`` do not go together.
     """
-    from .train import pick_device
+    from .train import _coarse_run_record, _trainable, load_run, pick_device
 
+    tier = _trainable(tier, "train_physics: tier")
     if config.objective is not Objective.PHYSICS:
         raise ArgumentError(f"train_physics: config.objective is {config.objective.value!r}, not 'physics'")
+    if (tier is Tier.DETAIL) != (coarse_run is not None):
+        raise ArgumentError("train_physics: the detail tier needs --coarse-run (the trained coarse run), "
+                            "the coarse tier takes none")
     run_dir = Path(run_dir)
     if (run_dir / CHECKPOINT).exists():
         raise ArgumentError(f"--out {run_dir}: a run exists there; pick a new folder")
     dev = pick_device(device)
     body = body if body is not None else load_body_model()
-    data = physics_set(config_path, body, heading=config.heading, splits=(Split.TRAIN, Split.VAL),
+    coarse = load_run(coarse_run, device=dev) if coarse_run is not None else None
+    if coarse is not None and coarse.tier is not Tier.COARSE:
+        raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run, not a coarse one")
+    heading = coarse.config.heading if coarse is not None else config.heading
+    base = coarse.config.coarse_base if coarse is not None else config.coarse_base
+    data = physics_set(config_path, body, heading=heading, splits=(Split.TRAIN, Split.VAL),
                        max_frames=config.max_frames or None, bending_scale=config.bending_scale)
     train_clips, val_clips = data.split(Split.TRAIN), data.split(Split.VAL)
     if not train_clips:
         raise ArgumentError(f"{config_path}: no training sequences")
-    base = config.coarse_base
-    torch.manual_seed(config.seed)
-    model = build_model(Tier.COARSE, config).to(dev)
-    _statistics(model, body, train_clips, config, base)
-    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     tensors = _Tensors(dev)
+    step = _Tier(tier, body, base, tensors, coarse.model if coarse is not None else None)
+    torch.manual_seed(config.seed)
+    model = build_model(tier, config).to(dev)
+    _statistics(model, step, train_clips, config)
+    optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     run_dir.mkdir(parents=True, exist_ok=True)
     data.fit.save(run_dir / PHYSICS_FIT)
-    info = {"format": RUN_FORMAT, "tier": Tier.COARSE.value, "config": config.to_json(),
+    info = {"format": RUN_FORMAT, "tier": tier.value, "config": config.to_json(),
             "model_config": dataclasses.asdict(model.config),
             "data": {"path": str(Path(config_path).resolve()), "manifest_sha256": data.config_sha256,
                      "train_sequences": len(train_clips), "val_sequences": len(val_clips), "kind": "physics"},
             "physics": {"material": dataclasses.asdict(data.material), "fit": PHYSICS_FIT},
-            "coarse_run": None, "body_model_sha256": body.sha256, "torch": torch.__version__}
+            "coarse_run": _coarse_run_record(coarse) if coarse is not None else None,
+            "body_model_sha256": body.sha256, "torch": torch.__version__}
     _atomic_text(json.dumps(info, indent=2, sort_keys=True) + "\n", run_dir / RUN)
+    against = "skinning" if tier is Tier.COARSE else "the coarse garment"
     history: list[EpochRecord] = []
     best_loss, best_epoch = math.inf, -1
     for epoch in range(config.epochs):
@@ -255,16 +313,15 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
         total = 0.0
         for k, frames in batches:
             clip = train_clips[k]
-            feats, points, bp, bn = _frames(body, clip, frames, base)
-            x = torch.from_numpy(points).to(dev) + _coarse_forward(model, feats, clip.pair.graph, tensors).double()
-            loss = _energy(clip, x, bp, bn, data.material).mean()
+            inp = step.inputs(clip, frames)
+            loss = _energy(clip, step.forward(model, clip, inp), inp, data.material).mean()
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
             if config.grad_clip:
                 torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
             optimizer.step()
             total += float(loss.detach())
-        val_loss, val_mm = _validate(model, tensors, body, val_clips, config, data.material, base)
+        val_loss, val_mm = _validate(model, step, val_clips, config, data.material)
         record = EpochRecord(epoch=epoch, train_loss=total / max(len(batches), 1), val_loss=val_loss, val_mm=val_mm,
                              lr=lr, seconds=time.perf_counter() - began)
         history.append(record)
@@ -276,11 +333,11 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
                       "rng": _rng_state(), "history": [dataclasses.asdict(r) for r in history],
                       "best_loss": best_loss, "best_epoch": best_epoch}, run_dir / CHECKPOINT)
         _write_history(run_dir, history)
-        plot_history(history, run_dir / CURVE, title=f"coarse (physics): {run_dir.name}", loss_label=
-                     "energy [J] (validation: relative to skinning)", mm_label="validation: distance from skinning [mm]",
-                     log_loss=False)
-        log.info("physics epoch %d: train %.4g J, val %+.4g J vs skinning (%.1f mm from it), %.1f s", epoch,
-                 record.train_loss, val_loss, val_mm, record.seconds)
+        plot_history(history, run_dir / CURVE, title=f"{tier.value} (physics): {run_dir.name}",
+                     loss_label=f"energy [J] (validation: relative to {against})",
+                     mm_label=f"validation: distance from {against} [mm]", log_loss=False)
+        log.info("physics %s epoch %d: train %.4g J, val %+.4g J vs %s (%.1f mm from it), %.1f s", tier.value,
+                 epoch, record.train_loss, val_loss, against, val_mm, record.seconds)
         if progress is not None:
             progress(record)
     if not history:

@@ -1,4 +1,4 @@
-"""The coarse generator trained on the garment's physics: planned sequences, lower energy, runs, export."""
+"""The generators trained on the garment's physics: planned sequences, lower energy, runs, export."""
 
 from __future__ import annotations
 
@@ -15,9 +15,9 @@ from cloth_usd.core.heading import Heading, root_yaw  # noqa: E402
 from cloth_usd.core.pipeline import CoarseBase  # noqa: E402
 from cloth_usd.errors import ArgumentError  # noqa: E402
 from cloth_usd.nn.data import Split  # noqa: E402
-from cloth_usd.nn.physics_train import _energy, _frames, _statistics, physics_set, train_physics  # noqa: E402
+from cloth_usd.nn.physics_train import _energy, _statistics, _Tier, physics_set, train_physics  # noqa: E402
 from cloth_usd.core.scene import Tier  # noqa: E402
-from cloth_usd.nn.train import Objective, TrainConfig, _coarse_forward, _Tensors, build_model, load_run  # noqa: E402
+from cloth_usd.nn.train import Objective, TrainConfig, _Tensors, build_model, load_run  # noqa: E402
 
 pytestmark = pytest.mark.slow
 PHYSICS = TrainConfig(objective="physics", coarse_base="skinned", width=0.0625, epochs=2, batch=3, max_batches=2,
@@ -58,17 +58,16 @@ def test_training_finds_a_garment_of_lower_energy_than_skinning(planned):
     """Overfitting one batch: the model's garment ends below the skinned garment's energy."""
     clip = planned.split(Split.TRAIN)[0]
     frames = np.arange(clip.num_frames)
-    feats, skinned, bp, bn = _frames(_body(), clip, frames, CoarseBase.SKINNED)
+    step = _Tier(Tier.COARSE, _body(), CoarseBase.SKINNED, _Tensors(torch.device("cpu")))
+    inp = step.inputs(clip, frames)
     torch.manual_seed(0)
     model = build_model(Tier.COARSE, PHYSICS)
-    _statistics(model, _body(), [clip], PHYSICS, CoarseBase.SKINNED)
-    tensors, opt = _Tensors(torch.device("cpu")), torch.optim.Adam(model.parameters(), lr=2e-3)
-    base = torch.from_numpy(skinned)
-    e_skinned = float(_energy(clip, base, bp, bn, planned.material).mean())
+    _statistics(model, step, [clip], PHYSICS)
+    opt = torch.optim.Adam(model.parameters(), lr=2e-3)
+    e_skinned = float(_energy(clip, torch.from_numpy(inp.base), inp, planned.material).mean())
 
     def energy():
-        return _energy(clip, base + _coarse_forward(model, feats, clip.pair.graph, tensors).double(), bp, bn,
-                       planned.material).mean()
+        return _energy(clip, step.forward(model, clip, inp), inp, planned.material).mean()
 
     first = float(energy().detach())
     for _ in range(60):
@@ -97,6 +96,24 @@ def test_a_physics_run_loads_and_exports_a_bundle_that_bakes(config_path, tmp_pa
     assert bundle.manifest["metrics"]["export_parity"]["coarse_max_m"] < 1e-4
     with pytest.raises(ArgumentError, match="a run exists there"):
         train_physics(config_path, tmp_path / "run", PHYSICS, device="cpu")
+
+
+def test_the_detail_tier_trains_on_the_coarse_run_and_ships_with_it(config_path, tmp_path):
+    from cloth_usd.nn.export import export_bundle
+    from cloth_usd.runtime.bundle import load_bundle
+
+    train_physics(config_path, tmp_path / "coarse", PHYSICS, device="cpu")
+    detail_cfg = TrainConfig(**{**PHYSICS.to_json(), "bending_scale": 1.0, "width": 0.125})
+    with pytest.raises(ArgumentError, match="detail tier needs --coarse-run"):
+        train_physics(config_path, tmp_path / "detail", detail_cfg, tier="detail", device="cpu")
+    result = train_physics(config_path, tmp_path / "detail", detail_cfg, tier="detail", coarse_run=tmp_path / "coarse",
+                           device="cpu")
+    assert all(np.isfinite(r.val_loss) for r in result.history)
+    run = load_run(tmp_path / "detail")
+    assert run.tier is Tier.DETAIL and run.info["coarse_run"]["path"].endswith("coarse")
+    out = export_bundle(tmp_path / "coarse", tmp_path / "detail", config_path, tmp_path / "bundle", name="phys-pair")
+    bundle = load_bundle(out)
+    assert Tier.DETAIL in bundle.tiers and bundle.manifest["metrics"]["export_parity"]["detail_max_m"] < 1e-4
 
 
 def test_the_supervised_trainer_refuses_the_physics_objective(tmp_path):
