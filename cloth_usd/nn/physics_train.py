@@ -45,9 +45,8 @@ from ..core.scene import Tier
 from ..errors import ArgumentError, ClothUsdError
 from .data import Moments, Split, plan_batches
 from .physics import GarmentRest, Material, garment_energy, garment_rest
-from .train import (BEST, CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, TrainConfig, TrainResult,
-                    _atomic_save, _atomic_text, _coarse_forward, _detail_forward, _rng_state, _Tensors, _write_history, build_model,
-                    plot_history)
+from .train import (CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, TrainConfig, TrainResult, _atomic_text,
+                    _coarse_forward, _detail_forward, _record_epoch, _step, _Tensors, build_model, plot_history)
 
 __all__ = ["PhysicsClip", "PhysicsSet", "physics_set", "train_physics", "PHYSICS_FIT", "OUTPUT_SCALE"]
 
@@ -314,25 +313,12 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
         for k, frames in batches:
             clip = train_clips[k]
             inp = step.inputs(clip, frames)
-            loss = _energy(clip, step.forward(model, clip, inp), inp, data.material).mean()
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            if config.grad_clip:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
-            optimizer.step()
-            total += float(loss.detach())
+            total += _step(model, optimizer, _energy(clip, step.forward(model, clip, inp), inp, data.material).mean(),
+                           config.grad_clip)
         val_loss, val_mm = _validate(model, step, val_clips, config, data.material)
         record = EpochRecord(epoch=epoch, train_loss=total / max(len(batches), 1), val_loss=val_loss, val_mm=val_mm,
                              lr=lr, seconds=time.perf_counter() - began)
-        history.append(record)
-        score = val_loss if not math.isnan(val_loss) else record.train_loss
-        if score <= best_loss or best_epoch < 0:
-            best_loss, best_epoch = score, epoch
-            _atomic_save({"epoch": epoch, "model": model.state_dict(), "val_loss": val_loss}, run_dir / BEST)
-        _atomic_save({"epoch": epoch, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-                      "rng": _rng_state(), "history": [dataclasses.asdict(r) for r in history],
-                      "best_loss": best_loss, "best_epoch": best_epoch}, run_dir / CHECKPOINT)
-        _write_history(run_dir, history)
+        best_loss, best_epoch = _record_epoch(run_dir, model, optimizer, history, record, best_loss, best_epoch)
         plot_history(history, run_dir / CURVE, title=f"{tier.value} (physics): {run_dir.name}",
                      loss_label=f"energy [J] (validation: relative to {against})",
                      mm_label=f"validation: distance from {against} [mm]", log_loss=False)

@@ -560,6 +560,34 @@ def _validate(model, examples: _Examples, clips: Sequence[Clip], config: TrainCo
     return loss_sum / count, err_sum / count * 1000.0
 
 
+def _step(model: torch.nn.Module, optimizer: torch.optim.Optimizer, loss: torch.Tensor, grad_clip: float) -> float:
+    """One optimisation step on ``loss`` (gradient norm clipped to ``grad_clip`` unless 0); its value."""
+    optimizer.zero_grad(set_to_none=True)
+    loss.backward()
+    if grad_clip:
+        torch.nn.utils.clip_grad_norm_(model.parameters(), grad_clip)
+    optimizer.step()
+    return float(loss.detach())
+
+
+def _record_epoch(run_dir: Path, model: torch.nn.Module, optimizer: torch.optim.Optimizer,
+                  history: list[EpochRecord], record: EpochRecord, best_loss: float, best_epoch: int
+                  ) -> tuple[float, int]:
+    """Append ``record``; write ``best.pt`` when it is the best so far (validation loss, or the
+    training loss without validation), the resumable checkpoint and the history files.
+    Returns the new ``(best_loss, best_epoch)``."""
+    history.append(record)
+    score = record.val_loss if not math.isnan(record.val_loss) else record.train_loss
+    if score <= best_loss or best_epoch < 0:
+        best_loss, best_epoch = score, record.epoch
+        _atomic_save({"epoch": record.epoch, "model": model.state_dict(), "val_loss": record.val_loss}, run_dir / BEST)
+    _atomic_save({"epoch": record.epoch, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
+                  "rng": _rng_state(), "history": [dataclasses.asdict(r) for r in history],
+                  "best_loss": best_loss, "best_epoch": best_epoch}, run_dir / CHECKPOINT)
+    _write_history(run_dir, history)
+    return best_loss, best_epoch
+
+
 def _rng_state() -> dict:
     state = {"torch": torch.get_rng_state()}
     if torch.cuda.is_available():
@@ -684,25 +712,12 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
         for clip, f, a, _, t in examples.iterate(batches):
             pred = _forward(model, examples.tensors, clip, f, a)
             loss = (((pred - torch.from_numpy(t).to(pred)) / scale) ** 2).mean()
-            optimizer.zero_grad(set_to_none=True)
-            loss.backward()
-            if config.grad_clip:
-                torch.nn.utils.clip_grad_norm_(model.parameters(), config.grad_clip)
-            optimizer.step()
-            total += float(loss.detach())
+            total += _step(model, optimizer, loss, config.grad_clip)
             steps += 1
         val_loss, val_mm = _validate(model, val_examples, val_clips, config)
         record = EpochRecord(epoch=epoch, train_loss=total / max(steps, 1), val_loss=val_loss, val_mm=val_mm,
                              lr=lr, seconds=time.perf_counter() - began)
-        history.append(record)
-        score = val_loss if not math.isnan(val_loss) else record.train_loss
-        if score <= best_loss or best_epoch < 0:
-            best_loss, best_epoch = score, epoch
-            _atomic_save({"epoch": epoch, "model": model.state_dict(), "val_loss": val_loss}, run_dir / BEST)
-        _atomic_save({"epoch": epoch, "model": model.state_dict(), "optimizer": optimizer.state_dict(),
-                      "rng": _rng_state(), "history": [dataclasses.asdict(r) for r in history],
-                      "best_loss": best_loss, "best_epoch": best_epoch}, run_dir / CHECKPOINT)
-        _write_history(run_dir, history)
+        best_loss, best_epoch = _record_epoch(run_dir, model, optimizer, history, record, best_loss, best_epoch)
         plot_history(history, run_dir / CURVE, title=f"{tier.value}: {run_dir.name}")
         log.info("%s epoch %d: train %.4g, val %.4g (%.3f mm), %.1f s", tier.value, epoch, record.train_loss,
                  val_loss, val_mm, record.seconds)
