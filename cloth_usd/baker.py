@@ -31,13 +31,14 @@ from .core.guard import GuardLimits, check_frames
 from .core.limits import BETA_LIMIT, betas_outside, pose_outliers
 from .core.scene import Character, Garment, Scene, Tier
 from .core.skinning import SkinBinding, bind_garment, skin_garment
-from .errors import ArgumentError, GarmentError, SceneError
+from .errors import ArgumentError, BodyModelError, GarmentError, SceneError
 
 if TYPE_CHECKING:
     from .runtime.bundle import ModelBundle
 
 __all__ = ["FrameRange", "GarmentReport", "BakeResult", "BakePlan", "ModelCache", "bake", "bake_plan",
-           "stitch_chunks", "parse_frames", "parse_tier", "FAR_FROM_BODY", "LEARNED_BATCH_VERTICES"]
+           "stitch_chunks", "parse_frames", "parse_tier", "FAR_FROM_BODY", "LEARNED_BATCH_VERTICES",
+           "MAX_CACHE_BYTES", "cache_bytes"]
 
 log = logging.getLogger(__name__)
 
@@ -47,6 +48,9 @@ FAR_FROM_BODY = 0.10
 #: Garment vertices per learned-model call when ``bake(batch_size=None)``: the model's
 #: activations grow with frames x vertices (about 100 MiB per 4000-vertex frame at width 0.125).
 LEARNED_BATCH_VERTICES = 16_000
+#: Largest cache a single bake builds [bytes]: the layer is held in memory until it is
+#: saved, so a longer range is refused up front (bake it in chunks, ``batch --chunk-frames``).
+MAX_CACHE_BYTES = 16 * 2 ** 30
 
 
 @dataclass(frozen=True)
@@ -57,17 +61,20 @@ class FrameRange:
     end: float
     step: float = 1.0
 
+    def count(self) -> int:
+        """T, the number of time codes, without making them."""
+        return int(np.floor((self.end - self.start) / self.step + 1e-9)) + 1
+
     def times(self) -> np.ndarray:
         """(T,) float64 time codes from start to end inclusive."""
-        count = int(np.floor((self.end - self.start) / self.step + 1e-9)) + 1
-        return self.start + self.step * np.arange(count, dtype=np.float64)
+        return self.start + self.step * np.arange(self.count(), dtype=np.float64)
 
     def __str__(self) -> str:
         """``START:END:STEP``, as :func:`parse_frames` reads it."""
         return f"{self.start:.10g}:{self.end:.10g}:{self.step:.10g}"
 
 
-_FRAMES = re.compile(r"^\s*(-?[\d.]+)\s*:\s*(-?[\d.]+)\s*(?::\s*([\d.]+)\s*)?$")
+_FRAMES = re.compile(r"^\s*(-?[\d.]+)\s*:\s*(-?[\d.]+)\s*(?::\s*(-?[\d.]+)\s*)?$")
 
 
 def parse_frames(text: str) -> FrameRange:
@@ -309,10 +316,60 @@ def _setup(stage, protected: list[str], *, frames, garments, tier, body_model, m
         gender = characters[g.body_path].gender
         if gender not in bodies:
             bodies[gender] = cache.body(body_model, gender)
+        _check_shape_components(characters[g.body_path], bodies[gender], source)
     digest = _inputs_digest(protected, frange, chosen, tiers, characters, bodies,
                             dict(joint_map.entries) if joint_map is not None else {})
     return _Setup(stage=stage, scene=scene, protected=protected, chosen=chosen, tiers=tiers,
                   frange=frange, bodies=bodies, inputs_sha256=digest)
+
+
+def _check_shape_components(char: Character, body: BodyModel, source: str) -> None:
+    """BodyModelError when the stage's betas use shape components the body model lacks."""
+    extra = np.flatnonzero(char.betas[body.num_betas:]) + body.num_betas
+    if extra.size:
+        used = int(extra[-1]) + 1
+        raise BodyModelError(
+            f"{source} <{char.prim_path}>: smpl:betas[{extra[0]}] is {char.betas[extra[0]]:g}, but the body "
+            f"model {body.source} has only {body.num_betas} shape components (the stage's betas use {used}); "
+            f"pass a body model with at least {used}, or zero the extra betas")
+
+
+def cache_bytes(frames: int, vertices: Sequence[int]) -> int:
+    """Estimated size [bytes] of a cache of ``frames`` time samples of garments with these
+    vertex counts: float32 points (12 bytes a vertex) and a 24-byte extent per frame."""
+    return int(frames) * sum(12 * int(n) + 24 for n in vertices)
+
+
+def _available_memory() -> int | None:
+    """Bytes of memory available to a new allocation (Linux ``MemAvailable``), or None."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except (OSError, ValueError, IndexError):
+        pass
+    return None
+
+
+def _check_size(setup: "_Setup", frames_arg, limit: int | None) -> None:
+    """ArgumentError, before anything is computed, for a cache too large to build in memory."""
+    count = setup.frange.count()
+    size = cache_bytes(count, [g.rest_points.shape[0] for g in setup.chosen])
+    cap = MAX_CACHE_BYTES if limit is None else int(limit)
+    available = _available_memory() if limit is None else None
+    why = None
+    if size > cap:
+        why = f"more than the {cap / 2 ** 30:.3g} GiB a single bake builds"
+    elif available is not None and size > available:
+        why = f"more than the {available / 2 ** 30:.3g} GiB of memory available"
+    if why is None:
+        return
+    what = f"--frames {frames_arg}" if isinstance(frames_arg, str) else f"frames {setup.frange}"
+    raise ArgumentError(
+        f"{what}: {count} frames x {sum(g.rest_points.shape[0] for g in setup.chosen)} garment vertices "
+        f"make a cache of about {size / 2 ** 30:.3g} GiB, {why}; bake a smaller range, or split it with "
+        "`cloth-usd batch --chunk-frames N`")
 
 
 def _inputs_digest(layer_files: Sequence[str], frange: FrameRange, chosen: Sequence[Garment],
@@ -370,7 +427,8 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
          progress: bool = False, models: str | Path | Sequence[str | Path] | None = None,
          batch_size: int | None = None, skip_current: bool = False, cache: ModelCache | None = None,
          on_progress: Callable[[str, int, int], None] | None = None, strict: bool = False,
-         guard: GuardLimits = GuardLimits(), joint_map: dict[str, str] | str | Path | None = None) -> BakeResult:
+         guard: GuardLimits = GuardLimits(), joint_map: dict[str, str] | str | Path | None = None,
+         max_cache_bytes: int | None = None) -> BakeResult:
     """Bake every enabled garment (or the named ones) of a stage into a point-cache layer.
 
     Args:
@@ -402,18 +460,28 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
         guard: when a learned frame is not a garment (:mod:`cloth_usd.core.guard`).
         joint_map: ``{their joint name: SMPL joint name}`` or a JSON / TOML file of it, for
             skeletons named in no known convention (:mod:`cloth_usd.core.joint_names`).
+        max_cache_bytes: refuse a bake whose cache (:func:`cache_bytes`) would be larger;
+            None: :data:`MAX_CACHE_BYTES` or the memory available, whichever is less.
+
+    Raises:
+        ArgumentError: among others, ``shot`` is the same file as ``output``, or the cache
+            would be too large to build (both before anything is computed).
     """
     from .usd.read import garment_from_internal, read_motion
-    from .usd.write import CacheLayerWriter, check_output_path, write_shot_layer
+    from .usd.write import CacheLayerWriter, check_output_path, remove_stale_temps, write_shot_layer
 
     began = time.perf_counter()
     cache = cache or ModelCache()
+    if shot is not None and _same_file(shot, output):
+        raise ArgumentError(f"--shot {shot}: is the same file as -o {output}; the shot layer sublayers the "
+                            "cache, so name a different file for it")
     stage, protected = _open(scene_path)
     check_output_path(output, force=force or skip_current, protected=protected)
     if shot is not None:
         check_output_path(shot, force=force or skip_current, protected=protected)
     setup = _setup(stage, protected, frames=frames, garments=garments, tier=tier, body_model=body_model,
                    models=models, cache=cache, joint_map=joint_map)
+    _check_size(setup, frames, max_cache_bytes)
     scene, times = setup.scene, setup.frange.times()
     scene_file = Path(stage.GetRootLayer().realPath)
     if skip_current and _is_current(output, setup):
@@ -429,6 +497,9 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
     check_output_path(output, force=force, protected=protected)
     if shot is not None:
         check_output_path(shot, force=force, protected=protected)
+    for target in (output, shot):
+        if target is not None:  # left by a bake of the same target that was killed
+            remove_stale_temps(target)
 
     characters = {c.prim_path: c for c in scene.characters}
     motions: dict[str, tuple[CanonicalMotion, list[str]]] = {}
@@ -460,6 +531,16 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
                                      force=force, protected=protected)
     return BakeResult(cache=cache_path, shot=shot_path, times=times, garments=tuple(reports),
                       seconds=time.perf_counter() - began, inputs_sha256=setup.inputs_sha256)
+
+
+def _same_file(a: str | Path, b: str | Path) -> bool:
+    """True when two paths name one file (after links, ``./`` and ``..``; hard links too)."""
+    if os.path.realpath(a) == os.path.realpath(b):
+        return True
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist yet
+        return False
 
 
 def _range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray) -> list[str]:

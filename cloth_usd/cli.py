@@ -4,7 +4,10 @@ from __future__ import annotations
 
 import argparse
 import logging
+import os
+import signal
 import sys
+import threading
 import traceback
 from typing import Sequence
 
@@ -200,6 +203,13 @@ def _bake(args: argparse.Namespace) -> int:
                   tier=args.tier, force=args.force, body_model=args.body_model, models=args.models,
                   joint_map=args.joint_map, progress=not args.no_progress and sys.stderr.isatty(),
                   strict=args.strict)
+    try:
+        return _bake_summary(result)
+    except OSError as exc:
+        raise _summary_failed(exc, [str(p) for p in (result.cache, result.shot) if p]) from exc
+
+
+def _bake_summary(result) -> int:
     for g in result.garments:
         sys.stdout.write(f"{g.prim_path}: {g.frames} frames, {g.vertices} vertices, tier {g.tier.value}\n")
         if g.bundle is not None:
@@ -214,7 +224,24 @@ def _bake(args: argparse.Namespace) -> int:
                      f"{per_frame:.1f} ms/frame)\n")
     if result.shot:
         sys.stdout.write(f"wrote {result.shot} (open this to see the animated garments)\n")
+    sys.stdout.flush()
     return 0
+
+
+def _summary_failed(exc: OSError, written: list[str]) -> ClothUsdError:
+    """The error for a summary that stdout refused (a full disk, a closed pipe); stdout is
+    pointed at /dev/null so that Python's flush at exit adds no traceback."""
+    from .errors import OutputWriteError
+
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    except (OSError, AttributeError, ValueError):  # not a real file (captured in tests)
+        pass
+    files, many = " and ".join(written), len(written) > 1
+    return OutputWriteError(f"stdout: cannot write the summary ({exc.strerror or exc}); {files} "
+                            f"{'were' if many else 'was'} written and {'are' if many else 'is'} complete")
 
 
 def _batch(args: argparse.Namespace) -> int:
@@ -347,11 +374,22 @@ def _import_motion(args: argparse.Namespace) -> int:
     return 0
 
 
+class _Terminated(BaseException):
+    """SIGTERM (what farm schedulers send), raised where the process is, so that every
+    ``with`` block and ``finally`` on the way out runs."""
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise _Terminated()
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the process exit code."""
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="cloth-usd: %(levelname)s: %(message)s")
+    installed = threading.current_thread() is threading.main_thread()  # signal.signal works there only
+    previous = signal.signal(signal.SIGTERM, _on_sigterm) if installed else None
     try:
         commands = {"inspect": _inspect, "bake": _bake, "doctor": _doctor, "render": _render, "batch": _batch,
                     "datagen": _datagen,
@@ -366,6 +404,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         sys.stderr.write("cloth-usd: interrupted; no output was written\n")
         return 130
+    except _Terminated:  # the temporary files were removed on the way out (CacheLayerWriter)
+        done = {"bake": "; nothing was written",
+                "batch": "; jobs that had finished keep their outputs, the others wrote nothing"}
+        sys.stderr.write(f"cloth-usd: interrupted (SIGTERM){done.get(args.command, '')}\n")
+        return 128 + signal.SIGTERM
+    finally:
+        if installed:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
 
 
 if __name__ == "__main__":

@@ -85,3 +85,71 @@ def test_frame_ranges():
     assert parse_frames("1:5:2").times().tolist() == [1.0, 3.0, 5.0]
     assert parse_frames("1001:1001").times().tolist() == [1001.0]
     assert FrameRange(0.0, 1.0, 0.25).times().tolist() == [0.0, 0.25, 0.5, 0.75, 1.0]
+
+
+def test_a_negative_step_says_step_must_be_positive():
+    from cloth_usd.errors import ArgumentError
+
+    for text in ("1:5:-1", "1:5:0"):
+        with pytest.raises(ArgumentError, match=rf"--frames '{text}': STEP must be positive"):
+            parse_frames(text)
+    assert FrameRange(1.0, 5.0, 2.0).count() == 3
+
+
+def test_shot_and_output_naming_one_file_are_refused_up_front(tmp_path, character):
+    import os
+
+    from cloth_usd.errors import ArgumentError
+
+    scene = _stage(tmp_path / "s.usda", character)
+    out = tmp_path / "x.usda"
+    out.write_bytes(b"keep me")
+    os.symlink(out, tmp_path / "link.usda")
+    for shot in (out, tmp_path / "." / "x.usda", tmp_path / "link.usda"):
+        with pytest.raises(ArgumentError, match=r"--shot .*: is the same file as -o .*x.usda"):
+            bake(scene, out, shot=shot, force=True)
+    assert out.read_bytes() == b"keep me"
+
+
+def test_a_cache_too_large_is_refused_before_anything_is_computed(tmp_path, character):
+    from cloth_usd.baker import cache_bytes
+    from cloth_usd.errors import ArgumentError
+
+    scene = _stage(tmp_path / "s.usda", character)
+    n = character[2].shape[0]
+    assert cache_bytes(10, [n]) == 10 * (12 * n + 24)
+    with pytest.raises(ArgumentError, match=r"--frames 1:10: 10 frames x \d+ garment vertices make a cache of "
+                                            r"about .* GiB, more than .*--chunk-frames"):
+        bake(scene, tmp_path / "a.usdc", frames="1:10", max_cache_bytes=cache_bytes(10, [n]) - 1)
+    assert list(tmp_path.iterdir()) == [tmp_path / "s.usda"]
+    bake(scene, tmp_path / "a.usdc", frames="1:10", max_cache_bytes=cache_bytes(10, [n]))
+    with pytest.raises(ArgumentError, match=r"1000000000 frames .* more than the 16 GiB a single bake builds"):
+        bake(scene, tmp_path / "b.usdc", frames="1:1000000000")  # refused at once, no 8 GB of time codes
+
+
+def test_bake_removes_the_stale_temporary_files_of_its_targets(tmp_path, character):
+    scene = _stage(tmp_path / "s.usda", character)
+    stale = [tmp_path / ".a.k3Jd9_x2.tmp.usdc", tmp_path / ".shot.Zz00aa11.tmp.usda"]
+    other = tmp_path / ".b.k3Jd9_x2.tmp.usdc"  # another target's: not ours to remove
+    for p in (*stale, other):
+        p.write_bytes(b"left by a killed bake")
+    bake(scene, tmp_path / "a.usdc", shot=tmp_path / "shot.usda", frames="1:2")
+    assert not any(p.exists() for p in stale) and other.exists()
+
+
+def test_betas_beyond_the_body_models_shape_components_are_an_error(tmp_path, character):
+    from dataclasses import replace
+
+    from cloth_usd.baker import ModelCache
+    from cloth_usd.errors import BodyModelError
+
+    scene = _stage(tmp_path / "s.usda", character)  # betas (1.0, -0.5, 0, ...)
+    body = load_body_model()
+    one = replace(body, shapedirs=body.shapedirs[:, :, :1])
+    cache = ModelCache()
+    cache._bodies[("", "neutral")] = one
+    with pytest.raises(BodyModelError, match=r"</Char/Skel>: smpl:betas\[1\] is -0.5, but the body model .* "
+                                             r"has only 1 shape components \(the stage's betas use 2\)"):
+        bake(scene, tmp_path / "a.usdc", frames="1:2", cache=cache)
+    cache._bodies[("", "neutral")] = replace(body, shapedirs=body.shapedirs[:, :, :2])
+    assert bake(scene, tmp_path / "a.usdc", frames="1:2", cache=cache).garments  # the extras are all zero

@@ -214,3 +214,71 @@ def test_render_draws_a_stage_and_names_a_bad_view(tmp_path, capsys):
     assert png.stat().st_size > 1000
     assert main(["render", str(WALK), "-o", str(png), "--frames", "1001", "--view", "top"]) == 2
     assert "--view 'top': unknown" in capsys.readouterr().err
+
+
+_SLOW_BAKE = """
+import sys, time
+import cloth_usd.baker as baker
+real = baker.skin_garment
+def slow(*args, **kwargs):  # a long shot, without its memory
+    time.sleep(0.5)
+    return real(*args, **kwargs)
+baker.skin_garment = slow
+from cloth_usd.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_sigterm_mid_bake_removes_the_temporary_files_and_says_so(tmp_path):
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(SAMPLES.parent), os.environ.get("PYTHONPATH", "")]))
+    proc = subprocess.Popen([sys.executable, "-c", _SLOW_BAKE, "bake", str(WALK), "-o", str(tmp_path / "c.usdc"),
+                             "--shot", str(tmp_path / "shot.usda"), "--frames", "1001:1096:0.25", "--no-progress"],
+                            cwd=tmp_path, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        deadline = time.monotonic() + 60
+        while not list(tmp_path.glob(".c.*.tmp.usdc")):  # the writer has begun
+            assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+            time.sleep(0.05)
+        time.sleep(0.3)
+        proc.send_signal(signal.SIGTERM)
+        out, err = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 143, (out, err)
+    assert err == "cloth-usd: interrupted (SIGTERM); nothing was written\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == []
+
+
+def test_a_full_stdout_keeps_the_cache_and_says_so_in_one_line(tmp_path, capsys, monkeypatch):
+    import errno
+    import sys
+
+    class Full:
+        def write(self, text):
+            raise OSError(errno.ENOSPC, "No space left on device")
+
+        def flush(self):
+            pass
+
+    monkeypatch.setattr(sys, "stdout", Full())
+    cache = tmp_path / "c.usdc"
+    assert main(["bake", str(WALK), "-o", str(cache), "--frames", "1001:1003", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert err == (f"cloth-usd: error: stdout: cannot write the summary (No space left on device); {cache} was "
+                   "written and is complete\n")
+    assert list(Sdf.Layer.FindOrOpen(str(cache)).ListTimeSamplesForPath("/Character/Tshirt.points")) == [
+        1001.0, 1002.0, 1003.0]
+
+
+def test_main_leaves_the_sigterm_handler_as_it_found_it():
+    import signal
+
+    before = signal.getsignal(signal.SIGTERM)
+    assert main(["bake", "nothing.usda", "-o", "x.usdc"]) == 2
+    assert signal.getsignal(signal.SIGTERM) is before

@@ -13,6 +13,7 @@ Shape letters: N garment vertices, V body vertices, G anchors (N_g*), P pairs, F
 
 from __future__ import annotations
 
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Sequence
@@ -57,9 +58,58 @@ class FitModel:
 
     @classmethod
     def load(cls, path: str | Path) -> "FitModel":
-        with np.load(path, allow_pickle=False) as d:
-            return cls(anchors=d["anchors"], mean=d["mean"], loadings=d["loadings"],
-                       noise_variance=d["noise_variance"])
+        """Read a :meth:`save` file.
+
+        Raises:
+            ValueError: the file is not an ``.npz`` archive, lacks a key, or holds arrays
+                of the wrong shape, type or value (the message says which).
+            OSError: it cannot be read.
+        """
+        try:
+            data = np.load(path, allow_pickle=False)
+        except (zipfile.BadZipFile, EOFError) as exc:
+            raise ValueError(f"not a readable .npz archive ({exc or type(exc).__name__})") from exc
+        if not isinstance(data, np.lib.npyio.NpzFile):
+            raise ValueError("a single .npy array, not an .npz archive of anchors, mean, loadings, "
+                             "noise_variance")
+        with data:
+            missing = [k for k in _FIT_KEYS if k not in data.files]
+            if missing:
+                raise ValueError(f"missing key '{missing[0]}' (has {', '.join(data.files) or 'no arrays'})")
+            try:
+                arrays = {k: data[k] for k in _FIT_KEYS}
+            except (zipfile.BadZipFile, EOFError, OSError) as exc:
+                raise ValueError(f"a truncated or corrupt .npz archive ({exc or type(exc).__name__})") from exc
+        _check_fit_arrays(arrays)
+        return cls(**arrays)
+
+
+_FIT_KEYS = ("anchors", "mean", "loadings", "noise_variance")
+
+
+def _check_fit_arrays(a: dict[str, np.ndarray]) -> None:
+    """ValueError naming the first array of a fit model whose shape, type or values are wrong."""
+    anchors = a["anchors"]
+    if anchors.ndim != 1 or anchors.size == 0 or anchors.dtype.kind not in "iu":
+        raise ValueError(f"'anchors' must be a non-empty (G,) integer array, got {anchors.dtype} "
+                         f"{anchors.shape}")
+    g = anchors.shape[0]
+    if anchors.min() < 0:
+        raise ValueError(f"'anchors' holds a negative vertex index ({int(anchors.min())})")
+    want = {"mean": (g,), "noise_variance": (g,)}
+    for key in ("mean", "loadings", "noise_variance"):
+        arr = a[key]
+        if arr.dtype.kind not in "fiu":
+            raise ValueError(f"'{key}' must be numbers, got {arr.dtype}")
+        shape_ok = arr.shape == want[key] if key in want else (arr.ndim == 2 and arr.shape[0] == g
+                                                                and arr.shape[1] >= 1)
+        if not shape_ok:
+            expected = want[key] if key in want else f"({g}, F)"
+            raise ValueError(f"'{key}' has shape {arr.shape}, expected {expected} for {g} anchors")
+        if not np.isfinite(arr).all():
+            raise ValueError(f"'{key}' holds NaN or infinite values")
+    if (a["noise_variance"] <= 0).any():
+        raise ValueError("'noise_variance' must be positive")
 
 
 def select_anchors(body_vertices: np.ndarray, covered: np.ndarray, count: int) -> np.ndarray:

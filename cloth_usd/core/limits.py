@@ -14,12 +14,15 @@ from scipy.spatial.transform import Rotation
 
 from .smpl import JOINT_NAMES, NUM_JOINTS
 
-__all__ = ["BETA_LIMIT", "EULER_ORDERS", "JOINT_LIMITS", "PoseOutlier", "betas_outside", "pose_outliers",
+__all__ = ["BETA_LIMIT", "BETA_MAX", "EULER_ORDERS", "JOINT_LIMITS", "PoseOutlier", "betas_outside", "pose_outliers",
            "poses_to_euler"]
 
 #: Largest ``|beta|`` of the bodies the models were trained on (SMPL's shape space is
 #: a PCA in standard deviations; beyond 3 the bodies are implausible).
 BETA_LIMIT = 3.0
+#: Largest ``|beta|`` a stage may author at all: past it a body is not a body (at 1e30 its
+#: points lie 5e24 m away), so the stage is refused rather than warned about.
+BETA_MAX = 10.0
 
 #: Intrinsic Euler order of each joint's angles (scipy's upper-case convention). The middle
 #: angle of each order stays inside (-90, 90) deg in :data:`JOINT_LIMITS`, so angles read

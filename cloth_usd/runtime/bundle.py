@@ -31,7 +31,7 @@ from ..core.fit import FitModel
 from ..core.heading import Heading
 from ..core.pipeline import CoarseBase
 from ..core.scene import Category, Tier
-from ..errors import ArgumentError, BundleError
+from ..errors import ArgumentError, BundleError, ClothUsdError
 from .io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT
 from .session import ModelSession
 
@@ -89,7 +89,21 @@ class ModelBundle:
             raise BundleError(f"{self.path}: bundle '{self.name}' has no '{tier.value}' model "
                               f"(tiers: {', '.join(t.value for t in self.tiers)})")
         if tier not in self._sessions:
-            self._sessions[tier] = ModelSession(self.model_path(tier), prefer_gpu=prefer_gpu)
+            path = self.model_path(tier)
+            try:
+                session = ModelSession(path, prefer_gpu=prefer_gpu)
+            except ClothUsdError:
+                raise
+            except Exception as exc:  # onnxruntime's errors (InvalidProtobuf, Fail, ...) derive from Exception only
+                reason = " ".join(str(exc).split())[:300]
+                raise BundleError(f"{self.path}: bundle file {path.name} is not a loadable ONNX model "
+                                  f"({reason}); the bundle is corrupt, reinstall it") from exc
+            expected = list(self.manifest["models"][tier.value].get("inputs", ()))
+            if sorted(session.input_names) != sorted(expected):
+                raise BundleError(f"{self.path}: bundle file {path.name} takes inputs "
+                                  f"{list(session.input_names)}, but the manifest lists {expected}; "
+                                  "the bundle is corrupt, reinstall it")
+            self._sessions[tier] = session
         return self._sessions[tier]
 
 
@@ -168,7 +182,7 @@ def load_bundle(path: str | Path) -> ModelBundle:
                               "was edited, reinstall it")
     try:
         fit = FitModel.load(folder / fit_file)
-    except (OSError, ValueError, KeyError) as exc:
+    except (OSError, ValueError) as exc:
         raise BundleError(f"{folder}: bundle file {fit_file} is not a fit model ({exc})") from exc
     return ModelBundle(path=folder, name=name, category=category, tiers=tiers,
                        sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit,
@@ -182,10 +196,14 @@ def _candidates(folder: Path) -> list[Path]:
 
 
 def _category_of(bundle: Path) -> str | None:
+    """The manifest's category; None when it names none. Raises BundleError when the
+    manifest is not readable JSON (a truncated copy), naming the file."""
+    mpath = bundle / MANIFEST
     try:
-        return json.loads((bundle / MANIFEST).read_bytes()).get("category")
-    except (OSError, ValueError, AttributeError):
-        return None
+        manifest = json.loads(mpath.read_bytes())
+    except (OSError, ValueError) as exc:
+        raise BundleError(f"{mpath}: unreadable manifest ({exc}); the bundle is corrupt, reinstall it") from exc
+    return manifest.get("category") if isinstance(manifest, dict) else None
 
 
 def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | None = None
@@ -198,21 +216,30 @@ def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | No
             None for :func:`default_bundle_dir`. Bundles are tried in name order.
     Raises:
         ArgumentError: a given search folder does not exist.
-        BundleError: the matching bundle fails verification.
+        BundleError: the matching bundle fails verification, or none matches and a
+            candidate's manifest is unreadable (it may be the one wanted).
     """
     category = Category(category)
     given = search_dirs is not None
     dirs = [Path(d) for d in search_dirs] if given else [default_bundle_dir()]
+    broken: list[BundleError] = []
     for d in dirs:
         if not d.is_dir():
             if given:
                 raise ArgumentError(f"--models {d}: no such folder")
             continue
         for candidate in _candidates(d):
-            if _category_of(candidate) == category.value:
+            try:
+                found = _category_of(candidate)
+            except BundleError as exc:  # it may be another category's: an error only if none is found
+                broken.append(exc)
+                continue
+            if found == category.value:
                 bundle = load_bundle(candidate)
                 log.info("model bundle %s (%s) for %s", bundle.name, bundle.path, category.value)
                 return bundle
+    if broken:
+        raise BundleError(f"no readable model bundle for category '{category.value}': {broken[0]}")
     return None
 
 

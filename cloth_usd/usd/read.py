@@ -10,6 +10,7 @@ Shape letters: T frames, N garment vertices, M triangles, J joints.
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import re
@@ -19,6 +20,7 @@ import numpy as np
 from pxr import Sdf, Tf, Usd, UsdGeom, UsdSkel
 
 from cloth_usd.core.joint_names import JointMap, as_joint_map, match_joints
+from cloth_usd.core.limits import BETA_MAX
 from cloth_usd.core.rotations import matrix_to_axis_angle
 from cloth_usd.core.scene import Category, Character, Garment, Motion, Scene, StageInfo, Tier
 from cloth_usd.core.smpl import JOINT_NAMES, NUM_BETAS, NUM_JOINTS, PARENTS
@@ -51,16 +53,26 @@ _EARLIEST = Usd.TimeCode.EarliestTime()
 def open_stage(path: str | os.PathLike) -> Usd.Stage:
     """Open a USD file as a stage (all payloads loaded).
 
+    Every sublayer, reference and payload asset of every layer it uses must resolve
+    and open: USD itself only warns and composes the stage without the layer (a
+    character without its animation), so that is an error here.
+
     Raises:
-        SceneError: the file is missing, unreadable or not a USD file.
+        SceneError: the file is missing, a folder, a broken or looping symbolic link,
+            unreadable or not a USD file, or a layer it composes is missing or does
+            not open (naming that layer and the one that uses it).
     """
     path = os.fspath(path)
     if not os.path.isfile(path):
-        raise SceneError(f"{path}: no such file; pass the path of a .usd, .usda, .usdc or .usdz scene")
+        raise SceneError(f"{path}: {_not_a_file(path)}; pass the path of a .usd, .usda, .usdc or .usdz scene")
     if not os.access(path, os.R_OK):
         raise SceneError(f"{path}: file is not readable; check its permissions")
     try:
-        stage = Usd.Stage.Open(path)
+        root = Sdf.Layer.FindOrOpen(path)
+        # Held until the stage has them, so that each layer is parsed once.
+        layers = _check_layer_stack(root, path) if root is not None else []
+        stage = Usd.Stage.Open(root) if root is not None else None
+        del layers
     except Tf.ErrorException as exc:
         raise SceneError(
             f"{path}: cannot open as a USD stage ({_tf_reason(exc)}); "
@@ -68,7 +80,87 @@ def open_stage(path: str | os.PathLike) -> Usd.Stage:
         ) from None
     if stage is None:
         raise SceneError(f"{path}: cannot open as a USD stage; pass a valid .usd, .usda, .usdc or .usdz file")
+    _check_composition(stage, path)
     return stage
+
+
+def _not_a_file(path: str, missing: str = "no such file") -> str:
+    """Why ``path`` (which is not a regular file) cannot be read, for messages; ``missing``
+    when there is nothing at all there."""
+    if os.path.isdir(path):
+        return "is a folder, not a USD file"
+    if os.path.islink(path):
+        try:
+            os.stat(path)
+        except OSError as exc:
+            if exc.errno == errno.ELOOP:
+                return "is a symbolic link loop"
+        return f"is a broken symbolic link (to {os.readlink(path)!r}, which does not exist)"
+    if os.path.exists(path):
+        return "is not a regular file"
+    return missing
+
+
+def _asset_file(layer: Sdf.Layer, asset: str) -> str:
+    """An asset path of ``layer`` resolved against it (a file path for plain files)."""
+    resolved = layer.ComputeAbsolutePath(asset)
+    if not os.path.isabs(resolved) and "[" not in resolved and layer.realPath:
+        resolved = os.path.normpath(os.path.join(os.path.dirname(layer.realPath), resolved))
+    return resolved
+
+
+def _check_layer_stack(root: Sdf.Layer, path: str) -> list[Sdf.Layer]:
+    """SceneError for the first sublayer, reference or payload asset that does not open.
+
+    Checked before the stage is composed, so USD's own warning is never printed.
+
+    Returns:
+        Every layer opened on the way, the root first.
+    """
+    seen = {root.identifier}
+    todo = [root]
+    opened = [root]
+    while todo:
+        layer = todo.pop()
+        sublayers = list(layer.subLayerPaths)
+        others = [a for a in layer.GetCompositionAssetDependencies() if a not in sublayers]
+        for asset in sublayers + others:
+            if not asset:
+                continue
+            kind = "sublayer" if asset in sublayers else "referenced or payload layer"
+            resolved = _asset_file(layer, asset)
+            where = f"{path}: {kind} @{asset}@ of {layer.realPath or layer.identifier}"
+            if os.path.isabs(resolved) and not os.path.isfile(resolved):
+                raise SceneError(f"{where}: {_not_a_file(resolved, 'does not exist')} "
+                                 f"(resolved to {resolved}); restore it or remove it from the layer")
+            try:
+                dep = Sdf.Layer.FindOrOpen(resolved)
+            except Tf.ErrorException as exc:
+                raise SceneError(f"{where}: cannot be opened ({_tf_reason(exc)}); repair or replace "
+                                 f"{resolved}") from None
+            if dep is None:
+                raise SceneError(f"{where}: cannot be found or opened (resolved to {resolved}); restore it "
+                                 "or remove it from the layer")
+            if dep.identifier not in seen:
+                seen.add(dep.identifier)
+                todo.append(dep)
+                opened.append(dep)
+    return opened
+
+
+#: Composition errors that mean the stage is missing content its layers ask for.
+_FATAL_COMPOSITION = ("ErrorInvalidSublayerPath", "ErrorInvalidAssetPath", "ErrorMutedAssetPath",
+                      "ErrorSublayerCycle", "ErrorArcCycle", "ErrorUnresolvedPrimPath")
+
+
+def _check_composition(stage: Usd.Stage, path: str) -> None:
+    """SceneError for a composition error that drops content; other errors are logged."""
+    errors = stage.GetCompositionErrors() if hasattr(stage, "GetCompositionErrors") else []
+    for error in errors:
+        text = str(error).strip()
+        if type(error).__name__ in _FATAL_COMPOSITION:
+            raise SceneError(f"{path}: the stage does not compose as its layers say: {text}")
+        _log.warning("%s: composition: %s", path, text)
 
 
 def stage_to_internal(stage: Usd.Stage) -> np.ndarray:
@@ -98,6 +190,10 @@ def read_stage_info(stage: Usd.Stage) -> StageInfo:
     s2i = stage_to_internal(stage)
     authored = bool(UsdGeom.StageHasAuthoredMetersPerUnit(stage))
     mpu = float(UsdGeom.GetStageMetersPerUnit(stage))
+    for key, value in (("timeCodesPerSecond", stage.GetTimeCodesPerSecond()),
+                       ("framesPerSecond", stage.GetFramesPerSecond())):
+        if not (np.isfinite(value) and value > 0.0):
+            raise SceneError(f"{_layer(stage)}: {key} is {value:g}; author a positive {key} (e.g. 24)")
     if not authored:
         _log.warning(
             "%s: metersPerUnit is not authored; using USD's fallback %g (centimetres). "
@@ -314,6 +410,12 @@ def _read_betas(prim: Usd.Prim, where: str) -> tuple[np.ndarray, bool]:
     bad = np.flatnonzero(~np.isfinite(betas))
     if bad.size:
         raise SceneError(f"{where}: smpl:betas[{bad[0]}] is {betas[bad[0]]}; author finite values")
+    bad = np.flatnonzero(np.abs(betas) > BETA_MAX)
+    if bad.size:
+        raise SceneError(
+            f"{where}: smpl:betas[{bad[0]}] is {betas[bad[0]]:g}, beyond any body SMPL's shape space "
+            f"describes (|beta| <= {BETA_MAX:g}); author betas in standard deviations, as the body model's"
+        )
     return np.pad(betas, (0, NUM_BETAS - betas.size)), True
 
 
@@ -390,6 +492,7 @@ def _posed_world_transforms(
     """
     anim = query.GetAnimQuery()
     animated = bool(anim)
+    _check_sample_keys([anim.GetPrim()] if animated else [], prim, where)
     anim_joints = len(anim.GetJointOrder()) if animated else 0
     xf_cache = UsdGeom.XformCache()
     num_joints = rest_skel.shape[0]
@@ -412,6 +515,26 @@ def _posed_world_transforms(
                 )
         out[i] = _local_to_world(xf_cache, prim) @ skel
     return out
+
+
+def _check_sample_keys(anims: list[Usd.Prim], prim: Usd.Prim, where: str) -> None:
+    """SceneError for a NaN or infinite time-sample key on the animation or on an xformOp
+    of the Skeleton and its ancestors (USD sorts and interpolates them as if finite)."""
+    attrs = [a for p in anims for a in p.GetAttributes()]
+    p = prim
+    while p and not p.IsPseudoRoot():
+        attrs.extend(a for a in p.GetAttributes() if a.GetName().startswith("xformOp:"))
+        p = p.GetParent()
+    for attr in attrs:
+        # From the layers: a NaN key breaks the composed attribute's sorted sample map.
+        keys = np.asarray([t for spec in attr.GetPropertyStack(_EARLIEST)
+                           for t in spec.layer.ListTimeSamplesForPath(spec.path)], dtype=np.float64)
+        bad = keys[~np.isfinite(keys)]
+        if bad.size:
+            raise SceneError(
+                f"{where}: {attr.GetPath()} has a time sample at time code {bad[0]:g}, not a finite "
+                "time code; remove that sample or give it a real frame number"
+            )
 
 
 def _check_finite(posed: np.ndarray, times: np.ndarray, where: str) -> None:
@@ -655,10 +778,20 @@ def _where(stage: Usd.Stage, prim: Usd.Prim) -> str:
 
 
 def _tf_reason(exc: Tf.ErrorException) -> str:
-    """The quoted reasons in a Tf error, most specific first."""
+    """The quoted reasons in a Tf error, most specific first (USD's generic "Failed to
+    open layer" only when there is nothing else)."""
     try:
         text = str(exc)
     except UnicodeDecodeError:  # USD quotes the offending bytes, which may not be UTF-8
         return "the file holds bytes that are not valid UTF-8 text"
-    reasons = re.findall(r": '(.*)'\s*$", text, flags=re.MULTILINE)
+    reasons: list[str] = []
+    for block in re.split(r"\n\s*Error in ", text):
+        m = re.search(r" : '(.*)'\s*$", block, flags=re.DOTALL)
+        if m:
+            reason = " ".join(m.group(1).split())
+            reasons = [r for r in reasons if r not in reason]  # keep the longer (located) copy
+            if not any(reason in r for r in reasons):
+                reasons.append(reason)
+    specific = [r for r in reasons if not r.startswith("Failed to open layer")]
+    reasons = specific or reasons
     return "; ".join(reasons) if reasons else text.strip()

@@ -3,7 +3,9 @@
 The cache layer holds only ``over`` specs at garment prim paths with time-sampled
 ``points`` and ``extent``. Layers are written to a temporary file beside the target and
 renamed into place, so a crash never leaves a partial file (a process killed mid-write
-leaves only its temporary file, which :func:`remove_stale_temps` clears); an existing
+leaves only its temporary file, which :func:`remove_stale_temps` clears, as every bake does
+for its own targets; the CLI turns SIGTERM into an exception, so the writer removes its
+temporary file itself); an existing
 file is only replaced with ``force``; a layer the source stage uses is never a target.
 Frame-chunk caches of one bake are joined into one layer by :func:`stitch_layers`.
 """

@@ -15,6 +15,9 @@ or import :func:`build_corpus`. ``Case.argv`` is relative to the corpus folder, 
 
 from __future__ import annotations
 
+import hashlib
+import json
+import os
 import pickle
 import shutil
 import sys
@@ -29,6 +32,7 @@ from cloth_usd.core.smpl import JOINT_NAMES, NUM_JOINTS, PARENTS
 __all__ = ["Case", "build_corpus", "SAMPLE", "SHARED"]
 
 SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "walk_tshirt" / "scene.usda"
+BUNDLE = Path(__file__).resolve().parents[2] / "models" / "bundles" / "tshirt-v3"
 SHARED = "_shared"
 SKEL = "/Character/Skeleton"
 SHIRT = "/Character/Tshirt"
@@ -219,6 +223,20 @@ def _nan_rest(stage):
             attr.Set(Vt.Matrix4dArray.FromNumpy(m))
 
 
+def _anim_time_key(key: float):
+    """A rotations time sample at a key that is not a finite time code."""
+    def edit(stage):
+        attr = UsdSkel.Animation(stage.GetPrimAtPath(MOTION)).GetRotationsAttr()
+        stage.GetRootLayer().SetTimeSample(attr.GetPath(), key, attr.Get(1001.0))  # USD drops a NaN key
+    return edit
+
+
+def _layer_info(key: str, value: float):
+    def edit(stage):
+        stage.GetRootLayer().pseudoRoot.SetInfo(key, value)
+    return edit
+
+
 def _no_time_codes(stage):
     layer = stage.GetRootLayer()
     layer.ClearStartTimeCode()
@@ -265,12 +283,15 @@ STAGE_EDITS: dict[str, tuple[Callable[[Usd.Stage], None], tuple[str, ...]]] = {
     "joints_attribute_missing": (_no_joints_attr, (SKEL, "lacks SMPL joint")),
     "rest_transforms_nan": (_nan_rest, (SKEL, "not finite")),
     "animation_nan_rotation": (_anim_nan_rotation, (SKEL, "1010")),
+    "animation_minus_inf_time_key": (_anim_time_key(float("-inf")), (SKEL, "Motion.rotations", "-inf")),
     "animation_too_few_rotations": (_anim_short_rotations, (SKEL, "one value per joint")),
     # shape and gender
     "betas_11_values": (_attr(SKEL, "smpl:betas", Sdf.ValueTypeNames.FloatArray, Vt.FloatArray([0.1] * 11)),
                         (SKEL, "smpl:betas", "11")),
     "betas_nan": (_attr(SKEL, "smpl:betas", Sdf.ValueTypeNames.FloatArray,
                         Vt.FloatArray([0.1, float("nan"), 0.0])), (SKEL, "smpl:betas[1]", "finite")),
+    "betas_huge": (_attr(SKEL, "smpl:betas", Sdf.ValueTypeNames.FloatArray, Vt.FloatArray([1e30])),
+                   (SKEL, "smpl:betas[0]", "1e+30", "10")),
     "betas_inf": (_attr(SKEL, "smpl:betas", Sdf.ValueTypeNames.DoubleArray,
                         Vt.DoubleArray([float("inf")])), (SKEL, "smpl:betas[0]")),
     "betas_strings": (_attr(SKEL, "smpl:betas", Sdf.ValueTypeNames.StringArray,
@@ -311,6 +332,9 @@ STAGE_EDITS: dict[str, tuple[Callable[[Usd.Stage], None], tuple[str, ...]]] = {
     "up_axis_x": (_up_axis("X"), ("upAxis", "'X'")),
     "meters_per_unit_zero": (_meters_per_unit(0.0), ("metersPerUnit",)),
     "meters_per_unit_negative": (_meters_per_unit(-1.0), ("metersPerUnit",)),
+    "time_codes_per_second_zero": (_layer_info("timeCodesPerSecond", 0.0), ("timeCodesPerSecond is 0", "positive")),
+    "time_codes_per_second_negative": (_layer_info("timeCodesPerSecond", -24.0), ("timeCodesPerSecond is -24",)),
+    "frames_per_second_zero": (_layer_info("framesPerSecond", 0.0), ("framesPerSecond",)),
 }
 
 
@@ -423,6 +447,8 @@ def _body_files(folder: Path, marker: Path) -> dict[str, tuple[str, tuple[str, .
     out["body_pickle_truncated"] = ("truncated.pkl", ("truncated.pkl", "not a loadable SMPL pickle"), ())
     (folder / "weights_string.pkl").write_bytes(pickle.dumps(dict(official, weights="heavy"), protocol=2))
     out["body_pickle_string_value"] = ("weights_string.pkl", ("weights_string.pkl", "'weights'"), ())
+    npz("two_shape_components", _edit_body(shapedirs=np.zeros((12, 3, 2))),
+        ("two_shape_components.npz", "smpl:betas[2]", "only 2 shape components"))
     (folder / "empty_folder").mkdir()
     out["body_folder_without_models"] = ("empty_folder", ("empty_folder", "SMPL_NEUTRAL"), ())
     return out
@@ -475,7 +501,16 @@ def build_corpus(out_dir: str | Path) -> list[Case]:
     f = folder("directory_as_scene")
     (f / "scene.usda").mkdir()
     cases.append(Case("directory_as_scene", bake("directory_as_scene", "directory_as_scene/scene.usda"),
-                      ("scene.usda", "no such file")))
+                      ("scene.usda", "is a folder")))
+    f = folder("symlink_loop_scene")
+    os.symlink("other.usda", f / "scene.usda")
+    os.symlink("scene.usda", f / "other.usda")
+    cases.append(Case("symlink_loop_scene", bake("symlink_loop_scene", "symlink_loop_scene/scene.usda"),
+                      ("scene.usda", "symbolic link loop")))
+    f = folder("broken_symlink_scene")
+    os.symlink("gone.usda", f / "scene.usda")
+    cases.append(Case("broken_symlink_scene", bake("broken_symlink_scene", "broken_symlink_scene/scene.usda"),
+                      ("scene.usda", "broken symbolic link", "gone.usda")))
     f = folder("non_utf8_usda")
     text = SAMPLE.read_bytes().replace(b'def Mesh "Tshirt"', b'def Mesh "T\xe9\xff\xfeshirt"', 1)
     (f / "scene.usda").write_bytes(text)
@@ -494,6 +529,44 @@ def build_corpus(out_dir: str | Path) -> list[Case]:
     folder("missing_scene_inspect")
     cases.append(Case("missing_scene_inspect", ["inspect", "missing_scene_inspect/nothing.usda"],
                       ("nothing.usda", "no such file")))
+
+    # --- layers a stage composes that are missing or broken (USD only warns and drops them)
+    def layered(name: str, sublayers: list[str], *, files: dict[str, bytes] | None = None,
+                reference: str | None = None) -> None:
+        f = folder(name)
+        shutil.copyfile(SAMPLE, f / "base.usda")
+        for rel, data in (files or {}).items():
+            (f / rel).write_bytes(data)
+        paths = ", ".join(f"@{p}@" for p in sublayers + ["base.usda"])
+        body = f'def Xform "Extra" (references = @{reference}@</Extra>) {{}}\n' if reference else ""
+        (f / "scene.usda").write_text(f"#usda 1.0\n(\n    subLayers = [{paths}]\n)\n{body}")
+
+    layered("sublayer_missing", ["motion.usda"])
+    cases.append(Case("sublayer_missing", bake("sublayer_missing", "sublayer_missing/scene.usda"),
+                      ("scene.usda", "sublayer @motion.usda@", "does not exist")))
+    layered("sublayer_empty_file", ["motion.usda"], files={"motion.usda": b""})
+    cases.append(Case("sublayer_empty_file", bake("sublayer_empty_file", "sublayer_empty_file/scene.usda"),
+                      ("scene.usda", "sublayer @motion.usda@", "cannot be opened")))
+    layered("sublayer_missing_inspect", ["motion.usda"])
+    cases.append(Case("sublayer_missing_inspect", ["inspect", "sublayer_missing_inspect/scene.usda"],
+                      ("scene.usda", "@motion.usda@", "does not exist")))
+    layered("reference_missing", [], reference="props.usda")
+    cases.append(Case("reference_missing", bake("reference_missing", "reference_missing/scene.usda"),
+                      ("scene.usda", "@props.usda@", "does not exist")))
+    layered("nested_sublayer_missing", ["mid.usda"],
+            files={"mid.usda": b"#usda 1.0\n(\n    subLayers = [@deep/anim.usda@]\n)\n"})
+    cases.append(Case("nested_sublayer_missing",
+                      bake("nested_sublayer_missing", "nested_sublayer_missing/scene.usda"),
+                      ("scene.usda", "@deep/anim.usda@", "mid.usda", "does not exist")))
+
+    # A NaN time-sample key, which USD's API will not author: written as text.
+    f = folder("animation_nan_time_key")
+    text = SAMPLE.read_text()
+    first = text.index("rotations.timeSamples")
+    first = text.index("1001:", first)
+    (f / "scene.usda").write_text(text[:first] + "nan:" + text[first + len("1001:"):])
+    cases.append(Case("animation_nan_time_key", bake("animation_nan_time_key", "animation_nan_time_key/scene.usda"),
+                      ("scene.usda", SKEL, "Motion.rotations", "nan", "not a finite")))
 
     # --- stages that break the scene contract
     for name, (edit, expect) in STAGE_EDITS.items():
@@ -519,6 +592,10 @@ def build_corpus(out_dir: str | Path) -> list[Case]:
                  (SHIRT, f"tier '{tier}'", "model bundle"))
         (root / f"tier_{tier}" / "no_bundles").mkdir()
     arg_case("tier_empty", ["--tier", ""], ("--tier ''",))
+    arg_case("frames_too_many", ["--frames", "1001:1000001000"],
+             ("--frames 1001:1000001000", "GiB", "--chunk-frames"))
+    arg_case("frames_negative_step_reason", ["--frames", "1001:1010:-2"],
+             ("--frames '1001:1010:-2'", "STEP must be positive"))
     for label, text in (("words", "abc"), ("reversed", "1050:1001"), ("zero_step", "1001:1010:0"),
                         ("negative_step", "1001:1010:-1"), ("empty", ""), ("dots", "1.2.3:1005"),
                         ("exponent", "1e3:2e3"), ("three_colons", "1:2:3:4"), ("only_start", "1001")):
@@ -532,6 +609,16 @@ def build_corpus(out_dir: str | Path) -> list[Case]:
     arg_case("output_no_extension", [], ("cache", ".usdc, .usda or .usd"), output="output_no_extension/cache")
     arg_case("output_is_source", ["--force"], ("scene.usda", "source"), output=good)
     arg_case("shot_is_source", ["--force", "--shot", good], ("scene.usda", "source"))
+    arg_case("shot_is_output", ["--force", "--shot", "shot_is_output/x.usda"], ("--shot", "same file"),
+             output="shot_is_output/x.usda")
+    arg_case("shot_is_output_dot_slash", ["--force", "--shot", "./shot_is_output_dot_slash/x.usda"],
+             ("same file",), output="shot_is_output_dot_slash/x.usda")
+    f = folder("shot_is_output_symlink")
+    (f / "x.usda").write_bytes(b"#usda 1.0\n")
+    os.symlink("x.usda", f / "link.usda")
+    cases.append(Case("shot_is_output_symlink", bake("shot_is_output_symlink", good, "--force", "--shot",
+                                                     "shot_is_output_symlink/link.usda",
+                                                     output="shot_is_output_symlink/x.usda"), ("same file",)))
     arg_case("shot_bad_extension", ["--shot", "shot_bad_extension/shot.png"], ("shot.png", ".usdc, .usda or .usd"))
     f = folder("output_exists")
     (f / "cache.usdc").write_bytes(b"keep me")
@@ -544,6 +631,43 @@ def build_corpus(out_dir: str | Path) -> list[Case]:
     f = folder("output_is_a_folder")
     (f / "cache.usdc").mkdir()
     cases.append(Case("output_is_a_folder", bake("output_is_a_folder", good, "--force"), ("cache.usdc", "is a folder")))
+
+    # --- model bundles whose files pass their sha256 check but are not what they say
+    def bundle_case(name: str, expect: tuple[str, ...], *, files: dict[str, bytes] | None = None,
+                    manifest: bytes | None = None, tier: str = "coarse") -> None:
+        f = folder(name)
+        shutil.copytree(BUNDLE, f / "models" / "tshirt-v3", ignore=shutil.ignore_patterns("report"))
+        b = f / "models" / "tshirt-v3"
+        data = json.loads((b / "manifest.json").read_text())
+        for rel, content in (files or {}).items():
+            (b / rel).write_bytes(content)
+            data["files"][rel] = hashlib.sha256(content).hexdigest()
+        (b / "manifest.json").write_text(json.dumps(data, indent=2))
+        if manifest is not None:
+            (b / "manifest.json").write_bytes(manifest)
+        cases.append(Case(name, bake(name, good, "--tier", tier, "--models", f"{name}/models"), expect))
+
+    onnx = (BUNDLE / "coarse.onnx").read_bytes()
+    rng = np.random.default_rng(2)
+    bundle_case("bundle_onnx_random_bytes", ("coarse.onnx", "not a loadable ONNX model"),
+                files={"coarse.onnx": rng.integers(0, 256, 4096, dtype=np.uint8).tobytes()})
+    bundle_case("bundle_onnx_truncated", ("coarse.onnx", "not a loadable ONNX model"),
+                files={"coarse.onnx": onnx[: len(onnx) // 2]})
+    bundle_case("bundle_detail_onnx_truncated", ("detail.onnx", "not a loadable ONNX model"), tier="detail",
+                files={"detail.onnx": (BUNDLE / "detail.onnx").read_bytes()[:1000]})
+    buf = f"{root}/_fit_wrong_shape.npz"
+    with np.load(BUNDLE / "fit.npz") as d:
+        np.savez(buf, **dict(d, loadings=d["loadings"][:, :, None]))
+    bundle_case("bundle_fit_wrong_shape", ("fit.npz", "'loadings'", "shape"),
+                files={"fit.npz": Path(buf).read_bytes()})
+    Path(buf).unlink()
+    bundle_case("bundle_fit_random_bytes", ("fit.npz", "not a fit model"),
+                files={"fit.npz": rng.integers(0, 256, 2048, dtype=np.uint8).tobytes()})
+    fit = (BUNDLE / "fit.npz").read_bytes()
+    bundle_case("bundle_fit_truncated", ("fit.npz", "not a fit model"), files={"fit.npz": fit[: len(fit) // 2]})
+    whole = (BUNDLE / "manifest.json").read_bytes()
+    bundle_case("bundle_manifest_truncated", ("manifest.json", "unreadable manifest"),
+                manifest=whole[: len(whole) // 2])
 
     # --- body model files
     f = folder("body_models")

@@ -131,3 +131,60 @@ def test_the_shipped_tshirt_bundle_verifies_and_records_its_evaluation():
     for row in evaluation["rows"]:  # issue #4: detail < coarse < skinning on every test set
         mean = row["mean_mm"]
         assert mean["detail"] < mean["coarse"] < mean["skinning"], row["title"]
+
+
+def _replace_file(folder, rel: str, data: bytes) -> None:
+    """Swap a bundle file and re-pin its sha256: content that is wrong but passes the hash check."""
+    import hashlib
+
+    (folder / rel).write_bytes(data)
+    m = json.loads((folder / "manifest.json").read_text())
+    m["files"][rel] = hashlib.sha256(data).hexdigest()
+    (folder / "manifest.json").write_text(json.dumps(m))
+
+
+@pytest.mark.parametrize("data", [bytes(range(256)) * 8, b"", b"\x08\x07\x12"])
+def test_an_onnx_file_that_is_not_a_model_is_a_bundle_error(tmp_path, fake_exported, data):
+    pytest.importorskip("onnxruntime", reason="sessions need onnxruntime")
+    folder = write_tiny_bundle(tmp_path / "b", fake_exported)
+    _replace_file(folder, "coarse.onnx", data)
+    bundle = load_bundle(folder)
+    with pytest.raises(BundleError, match=r"b: bundle file coarse.onnx is not a loadable ONNX model"):
+        bundle.session("coarse", prefer_gpu=False)
+
+
+def _fit_bytes(tmp_path, **arrays) -> bytes:
+    base = dict(anchors=np.arange(4), mean=np.zeros(4), loadings=np.ones((4, 3)), noise_variance=np.ones(4))
+    base.update(arrays)
+    np.savez(tmp_path / "x.npz", **{k: v for k, v in base.items() if v is not None})
+    return (tmp_path / "x.npz").read_bytes()
+
+
+@pytest.mark.parametrize("make, expect", [
+    (lambda p: _fit_bytes(p, loadings=np.ones((5, 3))), r"'loadings' has shape \(5, 3\), expected \(4, F\)"),
+    (lambda p: _fit_bytes(p, loadings=np.ones((4, 3, 1))), r"'loadings' has shape"),
+    (lambda p: _fit_bytes(p, mean=np.zeros(3)), r"'mean' has shape \(3,\), expected \(4,\)"),
+    (lambda p: _fit_bytes(p, anchors=np.zeros(4)), r"'anchors' must be a non-empty \(G,\) integer array"),
+    (lambda p: _fit_bytes(p, noise_variance=np.zeros(4)), r"'noise_variance' must be positive"),
+    (lambda p: _fit_bytes(p, mean=np.full(4, np.nan)), r"'mean' holds NaN"),
+    (lambda p: _fit_bytes(p, loadings=None), r"missing key 'loadings'"),
+    (lambda p: bytes(range(256)) * 4, r"not a fit model"),
+    (lambda p: _fit_bytes(p)[:200], r"not a fit model"),
+])
+def test_a_fit_file_of_the_wrong_content_is_a_bundle_error(tmp_path, fake_exported, make, expect):
+    folder = write_tiny_bundle(tmp_path / "b", fake_exported)
+    _replace_file(folder, "fit.npz", make(tmp_path))
+    with pytest.raises(BundleError, match=r"b: bundle file fit.npz is not a fit model") as info:
+        load_bundle(folder)
+    assert info.match(expect)
+
+
+def test_find_bundle_names_an_unreadable_manifest(tmp_path, fake_exported):
+    folder = write_tiny_bundle(tmp_path / "models" / "b", fake_exported)
+    text = (folder / "manifest.json").read_text()
+    (folder / "manifest.json").write_text(text[: len(text) // 2])
+    with pytest.raises(BundleError, match=r"no readable model bundle for category 'tshirt': .*manifest.json: "
+                                          r"unreadable manifest"):
+        find_bundle("tshirt", [tmp_path / "models"])
+    write_tiny_bundle(tmp_path / "models" / "c", fake_exported)  # a sound one beside it is found
+    assert find_bundle("tshirt", [tmp_path / "models"]).path.name == "c"

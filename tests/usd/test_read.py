@@ -417,3 +417,86 @@ def test_lenient_read_collects_problems():
     assert "</Hat>: cloth:category is 'hat'" in problems[0]
     assert "</Rig/Skel>" in problems[1] and "right_hand" in problems[1]
     assert "</Rig/Dress>: skipped" in problems[2]
+
+
+# ------------------------------------------------- layers that do not compose, odd paths
+
+
+def _layered(tmp_path, sublayers: list[str], body: str = ""):
+    """scene.usda sublayering ``sublayers`` and then base.usda (the standard scene)."""
+    source = _standard_scene()
+    source.GetRootLayer().Export(str(tmp_path / "base.usda"))
+    paths = ", ".join(f"@{p}@" for p in [*sublayers, "base.usda"])
+    (tmp_path / "scene.usda").write_text(f"#usda 1.0\n(\n    subLayers = [{paths}]\n)\n{body}")
+    return tmp_path / "scene.usda"
+
+
+def test_a_missing_sublayer_is_an_error_naming_it(tmp_path):
+    path = _layered(tmp_path, ["anim.usda"])
+    with pytest.raises(SceneError, match=r"scene.usda: sublayer @anim.usda@ of .*scene.usda: does not exist"):
+        read.open_stage(path)
+
+
+def test_an_empty_sublayer_file_is_an_error_naming_it(tmp_path):
+    path = _layered(tmp_path, ["anim.usda"])
+    (tmp_path / "anim.usda").write_bytes(b"")
+    with pytest.raises(SceneError, match=r"sublayer @anim.usda@ .*cannot be opened"):
+        read.open_stage(path)
+
+
+def test_a_reference_to_a_missing_prim_is_an_error(tmp_path):
+    path = _layered(tmp_path, [], 'def Xform "Extra" (references = @base.usda@</Nope>) {}\n')
+    with pytest.raises(SceneError, match=r"does not compose as its layers say: .*</Nope>"):
+        read.open_stage(path)
+
+
+def test_a_sound_layer_stack_opens(tmp_path):
+    (tmp_path / "anim.usda").write_text("#usda 1.0\n")
+    stage = read.open_stage(_layered(tmp_path, ["anim.usda"]))
+    assert read.read_scene(stage).characters
+
+
+def test_a_folder_and_a_symlink_loop_are_named_for_what_they_are(tmp_path):
+    import os
+
+    (tmp_path / "dir.usda").mkdir()
+    with pytest.raises(SceneError, match=r"dir.usda: is a folder"):
+        read.open_stage(tmp_path / "dir.usda")
+    os.symlink(tmp_path / "b.usda", tmp_path / "a.usda")
+    os.symlink(tmp_path / "a.usda", tmp_path / "b.usda")
+    with pytest.raises(SceneError, match=r"a.usda: is a symbolic link loop"):
+        read.open_stage(tmp_path / "a.usda")
+
+
+def test_a_parse_error_keeps_usds_reason(tmp_path):
+    path = tmp_path / "scene.usda"
+    path.write_text("#usda 1.0\n(\n    framesPerSecond = 0\n)\n")
+    with pytest.raises(SceneError, match=r'invalid value for field "framesPerSecond"'):
+        read.open_stage(path)
+
+
+@pytest.mark.parametrize("value", [0.0, -24.0])
+def test_time_codes_per_second_must_be_positive(value):
+    stage = _standard_scene()
+    stage.SetTimeCodesPerSecond(value)
+    with pytest.raises(SceneError, match=rf"timeCodesPerSecond is {value:g}; author a positive"):
+        read.read_scene(stage)
+
+
+def test_absurd_betas_are_refused_naming_the_prim_and_value():
+    stage = _standard_scene()
+    stage.GetPrimAtPath("/Char/Skel").GetAttribute("smpl:betas").Set(Vt.FloatArray([0.5, 1e30]))
+    with pytest.raises(SceneError, match=r"</Char/Skel>: smpl:betas\[1\] is 1e\+30"):
+        read.read_scene(stage)
+
+
+@pytest.mark.parametrize("key", [float("-inf"), float("inf")])
+def test_a_non_finite_time_sample_key_is_named(key):
+    stage = _stage()
+    author.author_skeleton(stage, "/Char/Skel", joint_positions=np.zeros((24, 3)), betas=[],
+                           poses=np.zeros((4, 72)))
+    attr = UsdSkel.Animation(stage.GetPrimAtPath("/Char/Skel/Motion")).GetTranslationsAttr()
+    attr.Set(attr.Get(1.0), key)
+    (character,) = read.read_scene(stage).characters
+    with pytest.raises(SceneError, match=rf"Motion.translations has a time sample at time code {key:g}"):
+        read.read_motion(stage, character, np.arange(4.0))
