@@ -301,3 +301,26 @@ def test_the_joint_map_is_part_of_the_bake_digest(tmp_path):
     mirror = {n: n.replace("left_", "R#").replace("right_", "left_").replace("R#", "right_") for n in JOINT_NAMES}
     swapped = {k: mirror[v] for k, v in names.items()}  # the rig read mirrored: a valid, different map
     assert bake_plan(custom, joint_map=swapped).inputs_sha256 != first
+
+
+@pytest.fixture(scope="module")
+def official_bake(tmp_path_factory):
+    out = tmp_path_factory.mktemp("official") / "ref.usdc"
+    assert main(["bake", str(WALK), "-o", str(out), "--frames", "1001:1049:24", "--no-progress"]) == 0
+    return _baked_at(out, (1001.0, 1025.0, 1049.0))
+
+
+def _baked_at(cache: Path, times) -> np.ndarray:
+    from pxr import Sdf
+
+    layer = Sdf.Layer.FindOrOpen(str(cache))
+    return np.stack([np.array(layer.QueryTimeSample("/Character/Tshirt.points", t)) for t in times])
+
+
+@pytest.mark.parametrize("convention", CONVENTIONS)
+def test_each_convention_bakes_the_same_points_as_the_official_names(convention, official_bake, tmp_path):
+    names, rename = CONVENTIONS[convention]
+    stage = _renamed_walk(tmp_path, names, **rename)
+    out = tmp_path / "c.usdc"
+    assert main(["bake", str(stage), "-o", str(out), "--frames", "1001:1049:24", "--no-progress"]) == 0
+    np.testing.assert_allclose(_baked_at(out, (1001.0, 1025.0, 1049.0)), official_bake, atol=1e-6)
