@@ -303,7 +303,8 @@ def _train(args: argparse.Namespace) -> int:
         config = dataclasses.replace(config, objective=args.objective)
 
     physics = config.objective.value == "physics"
-    mm = "mm from skinning" if physics else "mm"  # physics: val is the energy [J] above the skinned garment's
+    # physics: val is the energy [J] above the base garment's (skinned for coarse, M_coarse for detail)
+    mm = ("mm from skinning" if args.tier == "coarse" else "mm from the coarse garment") if physics else "mm"
 
     def show(r) -> None:
         sys.stdout.write(f"epoch {r.epoch + 1}/{config.epochs}: train {r.train_loss:.4g}, val {r.val_loss:.4g} "
