@@ -56,8 +56,8 @@ log = logging.getLogger(__name__)
 EXECUTORS = ("local", "ray")
 
 _STAGE_SUFFIXES = {".usd", ".usda", ".usdc", ".usdz"}
-_JOB_KEYS = ("name", "stage", "output", "frames", "garments", "tier", "models", "body_model")
-_DEFAULT_KEYS = ("frames", "garments", "tier", "models", "body_model")
+_JOB_KEYS = ("name", "stage", "output", "frames", "garments", "tier", "models", "body_model", "joint_map", "strict")
+_DEFAULT_KEYS = ("frames", "garments", "tier", "models", "body_model", "joint_map", "strict")
 _FILE_KEYS = ("out_dir", "defaults", "jobs")
 #: Test hook, read when a task starts: a folder of marker files ``<job name>.<task kind>.kill``
 #: (kinds: bake, plan, chunk, stitch). The first task that finds its marker removes it and
@@ -89,6 +89,11 @@ class Job:
     """Model bundle search folders, None for the shipped ones."""
     body_model: str | None = None
     """SMPL-format file or folder, None for the embedded model."""
+    joint_map: str | None = None
+    """Joint map file for skeletons named in no known convention (``bake --joint-map``)."""
+    strict: bool = False
+    """A learned frame that is not a garment fails the job (``bake --strict``) instead of
+    being replaced by a safer tier."""
 
     def bake_command(self) -> list[str]:
         """The ``cloth-usd bake`` command line that bakes this job by itself."""
@@ -105,6 +110,10 @@ class Job:
             cmd += ["--models", self.models[0]]
         if self.body_model:
             cmd += ["--body-model", self.body_model]
+        if self.joint_map:
+            cmd += ["--joint-map", self.joint_map]
+        if self.strict:
+            cmd += ["--strict"]
         return cmd
 
 
@@ -217,12 +226,13 @@ def _expand(spec: str) -> list[Path]:
 
 def load_jobs(sources: str | Path | Sequence[str | Path], *, out_dir: str | Path | None = None,
               frames: str | None = None, garments: Sequence[str] | None = None, tier: str | None = None,
-              models: str | Sequence[str] | None = None, body_model: str | None = None) -> list[Job]:
+              models: str | Sequence[str] | None = None, body_model: str | None = None,
+              joint_map: str | None = None, strict: bool | None = None) -> list[Job]:
     """Read jobs from job files, stage paths and globs.
 
     A TOML or JSON job file holds ``jobs`` (a list of tables with ``stage`` and
     optionally ``name``, ``output``, ``frames``, ``garments``, ``tier``, ``models``,
-    ``body_model``), optional ``defaults`` (the same keys but ``name``, ``stage``,
+    ``body_model``, ``joint_map``, ``strict``), optional ``defaults`` (the same keys but ``name``, ``stage``,
     ``output``) and ``out_dir``; relative paths are relative to the file. A ``.txt``
     lists stage paths, one a line (``#`` comments). Anything else is a stage or a glob.
 
@@ -240,7 +250,8 @@ def load_jobs(sources: str | Path | Sequence[str | Path], *, out_dir: str | Path
     if isinstance(sources, (str, Path)):
         sources = [sources]
     cli = {"frames": frames, "garments": _as_tuple(garments, "garments", "--garment"), "tier": tier,
-           "models": _as_tuple(models, "models", "--models"), "body_model": body_model}
+           "models": _as_tuple(models, "models", "--models"), "body_model": body_model, "joint_map": joint_map,
+           "strict": strict}
     entries: list[dict] = []
     for spec in sources:
         path = Path(spec)
@@ -262,8 +273,10 @@ def load_jobs(sources: str | Path | Sequence[str | Path], *, out_dir: str | Path
                     value = _as_tuple(value, key, label)
                     if key == "models" and value is not None:
                         value = tuple(str(base / m) for m in value)
-                elif key == "body_model" and value is not None:
+                elif key in ("body_model", "joint_map") and value is not None:
                     value = str(base / value)
+                elif key == "strict" and value is not None and not isinstance(value, bool):
+                    raise ArgumentError(f"{label}: strict must be true or false, got {value!r}")
                 e[key] = value if value is not None else cli[key]
             e["stage"] = base / job["stage"]
             e["output"] = base / job["output"] if job.get("output") else None
@@ -295,7 +308,8 @@ def load_jobs(sources: str | Path | Sequence[str | Path], *, out_dir: str | Path
         names.add(name)
         outputs[key] = e["label"]
         jobs.append(Job(name=name, stage=Path(e["stage"]), output=Path(e["output"]), frames=e["frames"],
-                        garments=e["garments"], tier=e["tier"], models=e["models"], body_model=e["body_model"]))
+                        garments=e["garments"], tier=e["tier"], models=e["models"], body_model=e["body_model"],
+                        joint_map=e["joint_map"], strict=bool(e["strict"])))
     return jobs
 
 
@@ -381,7 +395,7 @@ def _run_task(task: _Task) -> dict:
             task.output.parent.mkdir(exist_ok=True)
         remove_stale_temps(task.output)  # left by an attempt killed mid-write
         common = dict(frames=task.frames, garments=job.garments, tier=job.tier, body_model=job.body_model,
-                      models=list(job.models) if job.models else None, cache=_CACHE)
+                      models=list(job.models) if job.models else None, cache=_CACHE, joint_map=job.joint_map)
         if task.kind is _Kind.PLAN:
             plan = bake_plan(job.stage, None if task.force else job.output, **common)
             out = {"status": "skipped" if plan.current else "planned", "frames": str(plan.frames),
@@ -394,7 +408,7 @@ def _run_task(task: _Task) -> dict:
             out = {"status": "done"}
         else:
             result = bake(job.stage, task.output, force=True, skip_current=not task.force,
-                          on_progress=hook, **common)
+                          on_progress=hook, strict=job.strict, **common)
             out = {"status": "skipped" if result.skipped else "done", "frames": int(result.times.shape[0]),
                    "inputs_sha256": result.inputs_sha256,
                    "garments": [_garment_summary(g) for g in result.garments],

@@ -77,6 +77,9 @@ def _parser() -> argparse.ArgumentParser:
     bt.add_argument("--tier", help="tier for jobs that give none: skinning, coarse, detail")
     bt.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
     bt.add_argument("--models", metavar="DIR", help="model bundle folder for jobs that give none")
+    bt.add_argument("--joint-map", metavar="FILE", help="joint map for jobs that give none (see bake --joint-map)")
+    bt.add_argument("--strict", action="store_true", default=None,
+                    help="for jobs that do not say: a learned frame that is not a garment fails the job")
     bt.add_argument("--executor", default="local", choices=["local", "ray"],
                     help="local worker processes (default) or Ray (pip install 'cloth-usd[ray]')")
     bt.add_argument("--address", help="Ray cluster to join (default: start a local Ray)")
@@ -248,7 +251,7 @@ def _batch(args: argparse.Namespace) -> int:
     from .batch import describe_jobs, load_jobs, run_batch
 
     jobs = load_jobs(args.jobs, out_dir=args.out_dir, frames=args.frames, garments=args.garment, tier=args.tier,
-                     models=args.models, body_model=args.body_model)
+                     models=args.models, body_model=args.body_model, joint_map=args.joint_map, strict=args.strict)
     if args.dry_run:
         sys.stdout.write("".join(line + "\n" for line in describe_jobs(jobs)))
         return 0

@@ -314,3 +314,32 @@ def test_a_task_says_whether_its_error_is_worth_a_retry(tmp_path, monkeypatch, e
     out = _run_task(_Task(_Kind.BAKE, job, job.output))
     assert (out["status"], out["retry"]) == ("error", retry)
     assert out["error"].startswith(message)
+
+
+def test_jobs_carry_a_joint_map_and_strict_to_their_bakes(shots, tmp_path, capsys):
+    from test_extremes import fake_bundle
+
+    (tmp_path / "map.json").write_text(json.dumps({"Hips": "pelvis"}))
+    jobs = {"defaults": {"frames": "1:2", "tier": "coarse"},
+            "jobs": [{"stage": str(shots / "shot_a.usda"), "name": "lenient", "output": "a.usdc"},
+                     {"stage": str(shots / "shot_a.usda"), "name": "strict", "output": "b.usdc", "strict": True,
+                      "joint_map": "map.json"}]}
+    (tmp_path / "jobs.json").write_text(json.dumps(jobs))
+    loaded = {j.name: j for j in load_jobs(tmp_path / "jobs.json")}
+    assert (loaded["lenient"].strict, loaded["lenient"].joint_map) == (False, None)
+    assert loaded["strict"].strict and loaded["strict"].joint_map == str(tmp_path / "map.json")
+    assert loaded["strict"].bake_command()[-3:] == ["--joint-map", str(tmp_path / "map.json"), "--strict"]
+    # --strict on the command line is the default for the jobs that do not say
+    assert {j.name: j.strict for j in load_jobs(tmp_path / "jobs.json", strict=True)} == {"lenient": True,
+                                                                                          "strict": True}
+    wild = fake_bundle(tmp_path / "wild", 5.0)  # every learned frame is thrown 5 m off: not a garment
+    rc = main(["batch", str(tmp_path / "jobs.json"), "--models", str(wild), "--workers", "1",
+               "--report", str(tmp_path / "r.json")])
+    assert rc == 1
+    by = {j["name"]: j for j in json.loads((tmp_path / "r.json").read_text())["jobs"]}
+    assert by["lenient"]["status"] == "done" and by["strict"]["status"] == "failed"
+    assert "is not a garment" in by["strict"]["error"] and "--strict" in by["strict"]["error"]
+    assert not (tmp_path / "b.usdc").exists()
+    (tmp_path / "bad.toml").write_text('[[jobs]]\nstage = "a.usda"\nstrict = "yes"\n')
+    with pytest.raises(ArgumentError, match="strict must be true or false"):
+        load_jobs(tmp_path / "bad.toml")
