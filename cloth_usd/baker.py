@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import numpy as np
 
-from . import __version__
+from ._version import __version__
 from .core.body import BodyModel, load_body_model, shape_body
 from .core.files import file_sha256
 from .core.frames import CanonicalMotion, canonical_motion

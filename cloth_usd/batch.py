@@ -36,7 +36,6 @@ import multiprocessing
 import multiprocessing.connection
 import os
 import signal
-import threading
 import time
 from collections import deque
 from dataclasses import dataclass, field
@@ -44,8 +43,9 @@ from enum import Enum
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
+from .batch_tasks import KILL_HOOK_ENV, Event, Job, Kind, Task, run_task, worker_init
 from .core.files import read_config
-from .errors import ArgumentError, ClothUsdError, OutputWriteError
+from .errors import ArgumentError
 
 __all__ = ["Job", "JobStatus", "JobReport", "BatchReport", "load_jobs", "run_batch", "describe_jobs", "EXECUTORS",
            "KILL_HOOK_ENV"]
@@ -59,64 +59,6 @@ _STAGE_SUFFIXES = {".usd", ".usda", ".usdc", ".usdz"}
 _JOB_KEYS = ("name", "stage", "output", "frames", "garments", "tier", "models", "body_model", "joint_map", "strict")
 _DEFAULT_KEYS = ("frames", "garments", "tier", "models", "body_model", "joint_map", "strict")
 _FILE_KEYS = ("out_dir", "defaults", "jobs")
-#: Test hook, read when a task starts: a folder of marker files ``<job name>.<task kind>.kill``
-#: (kinds: bake, plan, chunk, stitch). The first task that finds its marker removes it and
-#: SIGKILLs its own worker: at once when the marker says ``start``, or once it has
-#: written its first frames into the temporary layer when it says ``write``.
-KILL_HOOK_ENV = "CLOTH_USD_BATCH_TEST_KILL"
-
-
-# ------------------------------------------------------------------------------ jobs
-
-
-@dataclass(frozen=True)
-class Job:
-    """One bake of a batch."""
-
-    name: str
-    """Unique within the batch; names the job in the summary and report."""
-    stage: Path
-    """The USD stage to read."""
-    output: Path
-    """The cache layer to write."""
-    frames: str | None = None
-    """``START:END[:STEP]``, None for the stage's range."""
-    garments: tuple[str, ...] | None = None
-    """Garment prim paths, None for every enabled garment."""
-    tier: str | None = None
-    """Default tier for garments without ``cloth:tier`` (None: skinning)."""
-    models: tuple[str, ...] | None = None
-    """Model bundle search folders, None for the shipped ones."""
-    body_model: str | None = None
-    """SMPL-format file or folder, None for the embedded model."""
-    joint_map: str | None = None
-    """Joint map file for skeletons named in no known convention (``bake --joint-map``)."""
-    strict: bool = False
-    """A learned frame that is not a garment fails the job (``bake --strict``) instead of
-    being replaced by a safer tier."""
-
-    def bake_command(self) -> list[str]:
-        """The ``cloth-usd bake`` command line that bakes this job by itself."""
-        cmd = ["cloth-usd", "bake", str(self.stage), "-o", str(self.output), "--force"]
-        if self.frames:
-            cmd += ["--frames", self.frames]
-        for g in self.garments or ():
-            cmd += ["--garment", g]
-        if self.tier:
-            cmd += ["--tier", self.tier]
-        if self.models:
-            if len(self.models) > 1:  # `bake --models` takes one folder
-                raise ArgumentError(f"job {self.name}: several model folders; `cloth-usd bake` takes one")
-            cmd += ["--models", self.models[0]]
-        if self.body_model:
-            cmd += ["--body-model", self.body_model]
-        if self.joint_map:
-            cmd += ["--joint-map", self.joint_map]
-        if self.strict:
-            cmd += ["--strict"]
-        return cmd
-
-
 def _frames_token(frames: str | None) -> str:
     if frames is None:
         return "all"
@@ -313,142 +255,7 @@ def load_jobs(sources: str | Path | Sequence[str | Path], *, out_dir: str | Path
     return jobs
 
 
-# ----------------------------------------------------------------------------- tasks
-
-
-class _Kind(str, Enum):
-    BAKE = "bake"
-    PLAN = "plan"
-    CHUNK = "chunk"
-    STITCH = "stitch"
-
-
-@dataclass(frozen=True)
-class _Task:
-    """One unit a worker runs; plain data, so it pickles for processes and Ray."""
-
-    kind: _Kind
-    job: Job
-    output: Path
-    """What the task writes (the job's output, or a chunk layer)."""
-    frames: str | None = None
-    force: bool = False
-    chunks: tuple[Path, ...] = ()
-    """Stitch: the chunk layers, in time order."""
-    inputs_sha256: str = ""
-
-
-_CACHE = None  # the worker process's ModelCache
-
-
-def _worker_init() -> None:
-    """Once per worker process: a model cache, and warnings kept for the report, not stderr."""
-    global _CACHE
-    if _CACHE is None:
-        from .baker import ModelCache
-
-        _CACHE = ModelCache()
-        logging.getLogger("cloth_usd").addHandler(logging.NullHandler())
-        # tqdm's default lock is a multiprocessing semaphore, which a killed worker leaks.
-        from tqdm import tqdm
-
-        tqdm.set_lock(threading.RLock())
-
-
-def _kill_hook(task: _Task) -> Callable[..., None] | None:
-    """The test hook of :data:`KILL_HOOK_ENV`."""
-    folder = os.environ.get(KILL_HOOK_ENV)
-    if not folder:
-        return None
-    marker = Path(folder) / f"{task.job.name}.{task.kind.value}.kill"
-    try:
-        mode = marker.read_text().strip()
-        marker.unlink()  # only one attempt (of one task) takes it
-    except FileNotFoundError:
-        return None
-
-    def die(*_: Any) -> None:
-        os.kill(os.getpid(), signal.SIGKILL)
-
-    if mode == "start":
-        die()
-    return die
-
-
-def _run_task(task: _Task) -> dict:
-    """Run one task in a worker; never raises for a job's own errors.
-
-    Returns:
-        ``status`` (done, skipped, planned or error), ``seconds`` and, by kind,
-        ``frames``, ``garments``, ``warnings``, ``inputs_sha256`` or ``error`` and
-        ``retry`` (whether another attempt could succeed).
-    """
-    _worker_init()
-    began = time.perf_counter()
-    try:
-        from .baker import bake, bake_plan, stitch_chunks
-        from .usd.write import remove_stale_temps
-
-        hook = _kill_hook(task)
-        job = task.job
-        if task.kind is _Kind.CHUNK:
-            task.output.parent.mkdir(exist_ok=True)
-        remove_stale_temps(task.output)  # left by an attempt killed mid-write
-        common = dict(frames=task.frames, garments=job.garments, tier=job.tier, body_model=job.body_model,
-                      models=list(job.models) if job.models else None, cache=_CACHE, joint_map=job.joint_map)
-        if task.kind is _Kind.PLAN:
-            plan = bake_plan(job.stage, None if task.force else job.output, **common)
-            out = {"status": "skipped" if plan.current else "planned", "frames": str(plan.frames),
-                   "count": int(plan.frames.times().shape[0]), "inputs_sha256": plan.inputs_sha256}
-        elif task.kind is _Kind.STITCH:
-            stitch_chunks(task.chunks, task.output, inputs_sha256=task.inputs_sha256, force=True)
-            for chunk in task.chunks:
-                chunk.unlink(missing_ok=True)
-            _remove_chunk_dir(task.chunks[0].parent)
-            out = {"status": "done"}
-        else:
-            result = bake(job.stage, task.output, force=True, skip_current=not task.force,
-                          on_progress=hook, strict=job.strict, **common)
-            out = {"status": "skipped" if result.skipped else "done", "frames": int(result.times.shape[0]),
-                   "inputs_sha256": result.inputs_sha256,
-                   "garments": [_garment_summary(g) for g in result.garments],
-                   "warnings": [w for g in result.garments for w in g.warnings]}
-    except OutputWriteError as exc:  # USD could not save: a full disk, a share gone; worth another attempt
-        out = {"status": "error", "error": _one_line(str(exc)), "retry": True}
-    except ClothUsdError as exc:
-        out = {"status": "error", "error": _one_line(str(exc)), "retry": False}
-    except OSError as exc:  # a full disk, a network share gone: worth another attempt
-        out = {"status": "error", "error": _one_line(f"{type(exc).__name__}: {exc}"), "retry": True}
-    except Exception as exc:  # a bug: report it with the job, keep the batch going
-        out = {"status": "error", "error": _one_line(f"{type(exc).__name__}: {exc}"), "retry": False}
-    out["seconds"] = time.perf_counter() - began
-    return out
-
-
-def _remove_chunk_dir(folder: Path) -> None:
-    """Remove a chunk folder and what earlier runs left in it (other chunk sizes, temps)."""
-    if folder.is_dir() and folder.name.endswith(".chunks"):
-        for entry in folder.iterdir():
-            if entry.is_file():
-                entry.unlink(missing_ok=True)
-        try:
-            folder.rmdir()
-        except OSError:
-            pass
-
-
-def _garment_summary(g) -> dict:
-    return {"prim": g.prim_path, "tier": g.tier.value, "vertices": g.vertices, "frames": g.frames,
-            "mean_body_distance_mm": round(g.mean_body_distance_mm, 3),
-            "max_displacement_mm": round(g.max_displacement_mm, 3), "max_offset_mm": round(g.max_offset_mm, 3)}
-
-
-def _one_line(text: str) -> str:
-    lines = [line.strip() for line in text.strip().splitlines() if line.strip()]
-    return lines[0] if lines else "unknown error"
-
-
-def _chunk_tasks(job: Job, frames: str, size: int, force: bool) -> list[_Task]:
+def _chunk_tasks(job: Job, frames: str, size: int, force: bool) -> list[Task]:
     """The frame chunks of a job, each a cache layer in ``.<output name>.chunks/``."""
     from .baker import FrameRange, parse_frames
 
@@ -459,7 +266,7 @@ def _chunk_tasks(job: Job, frames: str, size: int, force: bool) -> list[_Task]:
     for lo in range(0, times.shape[0], size):
         part = FrameRange(float(times[lo]), float(times[min(lo + size, times.shape[0]) - 1]), whole.step)
         path = folder / f"{part.start:.10g}_{part.end:.10g}{job.output.suffix}"
-        tasks.append(_Task(_Kind.CHUNK, job, path, frames=str(part), force=force))
+        tasks.append(Task(Kind.CHUNK, job, path, frames=str(part), force=force))
     return tasks
 
 
@@ -553,7 +360,7 @@ class _JobState:
     frames: int = 0
     attempts: int = 0
     inputs_sha256: str = ""
-    chunks: list[_Task] = field(default_factory=list)
+    chunks: list[Task] = field(default_factory=list)
     chunks_left: int = 0
     garments: dict = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
@@ -576,19 +383,6 @@ class _JobState:
         self.warnings += [w for w in result.get("warnings", ()) if w not in self.warnings]
 
 
-# --------------------------------------------------------------------------- executor
-
-
-@dataclass(frozen=True)
-class _Event:
-    """A task that ended: with a result, or with its worker dead (``died`` says how)."""
-
-    tid: int
-    result: dict | None
-    died: str | None = None
-    final: bool = False
-    """The executor already retried it (Ray): do not run it again."""
-
 
 class _Worker:
     def __init__(self, ctx) -> None:
@@ -609,7 +403,7 @@ def _worker_main(conn, kill_hook: str | None = None) -> None:
         os.environ[KILL_HOOK_ENV] = kill_hook
     else:
         os.environ.pop(KILL_HOOK_ENV, None)
-    _worker_init()
+    worker_init()
     while True:
         try:
             message = conn.recv()
@@ -618,7 +412,7 @@ def _worker_main(conn, kill_hook: str | None = None) -> None:
         if message is None:
             return
         tid, task = message
-        conn.send((tid, _run_task(task)))
+        conn.send((tid, run_task(task)))
 
 
 def _death(exitcode: int | None) -> str:
@@ -649,7 +443,7 @@ class _LocalPool:
     def free(self) -> int:
         return self.size - sum(w.tid is not None for w in self.workers)
 
-    def submit(self, tid: int, task: _Task) -> None:
+    def submit(self, tid: int, task: Task) -> None:
         worker = next((w for w in self.workers if w.tid is None), None)
         if worker is None:
             worker = _Worker(self.ctx)
@@ -657,7 +451,7 @@ class _LocalPool:
         worker.tid, worker.since = tid, time.monotonic()
         worker.conn.send((tid, task))
 
-    def wait(self, timeout: float) -> list[_Event]:
+    def wait(self, timeout: float) -> list[Event]:
         busy = [w for w in self.workers if w.tid is not None]
         if not busy:
             return []
@@ -667,19 +461,19 @@ class _LocalPool:
             try:
                 if w.conn.poll():
                     tid, result = w.conn.recv()
-                    events.append(_Event(tid, result))
+                    events.append(Event(tid, result))
                     w.tid = None
                     continue
             except (EOFError, OSError):
                 pass
             if not w.process.is_alive():
                 w.process.join()
-                events.append(_Event(w.tid, None, died=f"worker {_death(w.process.exitcode)}"))
+                events.append(Event(w.tid, None, died=f"worker {_death(w.process.exitcode)}"))
                 self._drop(w)
             elif self.timeout is not None and time.monotonic() - w.since > self.timeout:
                 w.process.kill()
                 w.process.join()
-                events.append(_Event(w.tid, None, died=f"timed out after {self.timeout:g} s (worker killed)"))
+                events.append(Event(w.tid, None, died=f"timed out after {self.timeout:g} s (worker killed)"))
                 self._drop(w)
         return events
 
@@ -747,12 +541,12 @@ def run_batch(jobs: Sequence[Job], *, executor: str = "local", workers: int | No
     else:
         pool = _LocalPool(workers, job_timeout)
     states = [_JobState(job) for job in jobs]
-    queue: deque[tuple[int, _Task]] = deque()
-    tasks: dict[int, tuple[int, _Task]] = {}  # tid -> (job index, task)
+    queue: deque[tuple[int, Task]] = deque()
+    tasks: dict[int, tuple[int, Task]] = {}  # tid -> (job index, task)
     attempts: dict[int, int] = {}
     running: set[int] = set()
 
-    def push(index: int, task: _Task) -> None:
+    def push(index: int, task: Task) -> None:
         tid = len(tasks)
         tasks[tid] = (index, task)
         queue.append((tid, task))
@@ -766,7 +560,7 @@ def run_batch(jobs: Sequence[Job], *, executor: str = "local", workers: int | No
             on_job(state.report())
 
     for i, job in enumerate(jobs):
-        push(i, _Task(_Kind.PLAN if chunk_frames else _Kind.BAKE, job, job.output, frames=job.frames, force=force))
+        push(i, Task(Kind.PLAN if chunk_frames else Kind.BAKE, job, job.output, frames=job.frames, force=force))
     try:
         while queue or running:
             while queue and pool.free() > 0:
@@ -807,29 +601,29 @@ def run_batch(jobs: Sequence[Job], *, executor: str = "local", workers: int | No
                        executor=executor, workers=workers)
 
 
-def _advance(state: _JobState, index: int, task: _Task, result: dict, chunk_frames: int | None,
-             force: bool, push: Callable[[int, _Task], None], finish: Callable[..., None]) -> None:
+def _advance(state: _JobState, index: int, task: Task, result: dict, chunk_frames: int | None,
+             force: bool, push: Callable[[int, Task], None], finish: Callable[..., None]) -> None:
     """A task of a job succeeded: queue what follows, or finish the job."""
     job = state.job
-    if task.kind is _Kind.PLAN:
+    if task.kind is Kind.PLAN:
         state.inputs_sha256 = result["inputs_sha256"]
         state.frames = result["count"]
         if result["status"] == "skipped":
             finish(index, JobStatus.SKIPPED)
         elif result["count"] <= (chunk_frames or 0):
-            push(index, _Task(_Kind.BAKE, job, job.output, frames=result["frames"], force=True))
+            push(index, Task(Kind.BAKE, job, job.output, frames=result["frames"], force=True))
         else:
             state.chunks = _chunk_tasks(job, result["frames"], chunk_frames or 1, force)
             state.chunks_left = len(state.chunks)
             for chunk in state.chunks:
                 push(index, chunk)
-    elif task.kind is _Kind.CHUNK:
+    elif task.kind is Kind.CHUNK:
         state.add(result)
         state.chunks_left -= 1
         if state.chunks_left == 0:
-            push(index, _Task(_Kind.STITCH, job, job.output, chunks=tuple(c.output for c in state.chunks),
+            push(index, Task(Kind.STITCH, job, job.output, chunks=tuple(c.output for c in state.chunks),
                               inputs_sha256=state.inputs_sha256))
-    elif task.kind is _Kind.STITCH:
+    elif task.kind is Kind.STITCH:
         finish(index, JobStatus.DONE)
     else:
         state.add(result)

@@ -13,7 +13,7 @@ import os
 import time
 from typing import Any
 
-from .batch import KILL_HOOK_ENV, _Event, _run_task, _Task
+from .batch_tasks import KILL_HOOK_ENV, Event, Task, run_task
 from .errors import ArgumentError
 
 __all__ = ["RayPool"]
@@ -58,16 +58,16 @@ class RayPool:
         cpus = int(ray.cluster_resources().get("CPU", workers))
         self.size = max(1, cpus if address is not None else min(workers, cpus))
         self.timeout = job_timeout
-        self._remote = ray.remote(num_cpus=1, max_retries=retries, retry_exceptions=False)(_run_task)
+        self._remote = ray.remote(num_cpus=1, max_retries=retries, retry_exceptions=False)(run_task)
         self._refs: dict[Any, tuple[int, float]] = {}  # ObjectRef -> (tid, submitted)
 
     def free(self) -> int:
         return self.size - len(self._refs)
 
-    def submit(self, tid: int, task: _Task) -> None:
+    def submit(self, tid: int, task: Task) -> None:
         self._refs[self._remote.remote(task)] = (tid, time.monotonic())
 
-    def wait(self, timeout: float) -> list[_Event]:
+    def wait(self, timeout: float) -> list[Event]:
         ray = self._ray
         if not self._refs:
             return []
@@ -78,17 +78,17 @@ class RayPool:
         for ref in ready:
             tid, _since = self._refs.pop(ref)
             try:
-                events.append(_Event(tid, ray.get(ref)))
+                events.append(Event(tid, ray.get(ref)))
             except ray.exceptions.RayError as exc:  # the worker died on every attempt
                 why = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-                events.append(_Event(tid, None, died=f"Ray {type(exc).__name__}: {why}", final=True))
+                events.append(Event(tid, None, died=f"Ray {type(exc).__name__}: {why}", final=True))
         if self.timeout is not None:
             now = time.monotonic()
             for ref, (tid, since) in list(self._refs.items()):
                 if now - since > self.timeout:
                     ray.cancel(ref, force=True)
                     del self._refs[ref]
-                    events.append(_Event(tid, None, died=f"timed out after {self.timeout:g} s (cancelled)"))
+                    events.append(Event(tid, None, died=f"timed out after {self.timeout:g} s (cancelled)"))
         return events
 
     def close(self) -> None:

@@ -11,7 +11,7 @@ import threading
 import traceback
 from typing import Sequence
 
-from . import __version__
+from ._version import __version__
 from .errors import ClothUsdError
 
 __all__ = ["main"]

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import __version__
+from ._version import __version__
 from .core.smpl import JOINT_NAMES, NUM_BETAS
 from .errors import ArgumentError, GarmentError, MotionFileError, OutputWriteError, SceneError
 

@@ -96,9 +96,7 @@ def render_frames(stage_path: str | Path, frames: Sequence[float], output: str |
                   body_model: str | Path | None = None, view: str = "three-quarter",
                   size: tuple[float, float] = (4.0, 5.0)) -> Path:
     """Draw body and garments at each frame side by side into one PNG."""
-    from pxr import UsdGeom
-
-    from .usd.read import garment_from_internal, open_stage, read_scene
+    from .usd.read import garment_points_internal, open_stage, read_scene
 
     if view not in _VIEWS:
         raise ClothUsdError(f"--view '{view}': unknown (valid: {', '.join(_VIEWS)})")
@@ -110,10 +108,7 @@ def render_frames(stage_path: str | Path, frames: Sequence[float], output: str |
     for i, t in enumerate(times):
         meshes = [(tri[i], BODY_RGB) for tri in bodies]
         for g in scene.garments:
-            pts = np.asarray(UsdGeom.Mesh(stage.GetPrimAtPath(g.prim_path)).GetPointsAttr().Get(float(t)),
-                             dtype=np.float64)
-            to_internal = np.linalg.inv(garment_from_internal(stage, g.prim_path, times[i:i + 1])[0])
-            pts = pts @ to_internal[:3, :3].T + to_internal[:3, 3]
+            pts = garment_points_internal(stage, g.prim_path, float(t))
             meshes.append((pts[g.triangles], GARMENT_RGB))
         panels.append((f"time code {t:g}", meshes))
     return draw_panels(panels, output, view=view, size=size)
@@ -123,7 +118,7 @@ def render_shard(shard_path: str | Path, frames: Sequence[int], output: str | Pa
                  body_model: str | Path | None = None, view: str = "three-quarter",
                  size: tuple[float, float] = (4.0, 5.0)) -> Path:
     """Draw a simulated sequence of the data factory (a shard) at some frame indices."""
-    from .datagen.dataset import read_shard
+    from .core.shards import read_shard
 
     shard = read_shard(shard_path)
     count = shard.positions.shape[0]

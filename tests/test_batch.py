@@ -299,7 +299,7 @@ def test_ray_executor_without_ray_says_what_to_install(shots, monkeypatch):
 ])
 def test_a_task_says_whether_its_error_is_worth_a_retry(tmp_path, monkeypatch, error, retry, message):
     import cloth_usd.baker
-    from cloth_usd.batch import _Kind, _run_task, _Task
+    from cloth_usd.batch_tasks import Kind, Task, run_task
     from cloth_usd.errors import OutputWriteError
 
     raised = {"write": OutputWriteError("out.usdc: USD could not save the layer"),
@@ -311,7 +311,7 @@ def test_a_task_says_whether_its_error_is_worth_a_retry(tmp_path, monkeypatch, e
 
     monkeypatch.setattr(cloth_usd.baker, "bake", failing_bake)
     job = Job(name="j", stage=tmp_path / "s.usda", output=tmp_path / "out.usdc")
-    out = _run_task(_Task(_Kind.BAKE, job, job.output))
+    out = run_task(Task(Kind.BAKE, job, job.output))
     assert (out["status"], out["retry"]) == ("error", retry)
     assert out["error"].startswith(message)
 

@@ -139,7 +139,7 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
     Raises:
         ArgumentError: naming the folder, when it is not a data set or a shard is unreadable.
     """
-    from ..datagen.dataset import DatasetError, Manifest, read_shard
+    from ..core.shards import DatasetError, Manifest, read_shard
 
     root = Path(root)
     if not (root / MANIFEST).is_file() or not (root / FIT).is_file():
@@ -199,7 +199,7 @@ TAUBIN_PASSES, TAUBIN_LAMBDA, TAUBIN_MU = 10, 0.5, -0.53
 
 def with_coarse_target(data: DataSet, target: CoarseTarget | str) -> DataSet:
     """``data`` with every clip's :attr:`Clip.coarse` made the ``target`` way (itself for STORED)."""
-    from ..datagen.dataset import laplacian_smooth
+    from ..core.mesh import laplacian_smooth
 
     if CoarseTarget(target) is CoarseTarget.STORED:
         return data

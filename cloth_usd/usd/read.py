@@ -33,6 +33,7 @@ __all__ = [
     "read_scene",
     "read_motion",
     "garment_from_internal",
+    "garment_points_internal",
 ]
 
 _log = logging.getLogger(__name__)
@@ -694,6 +695,22 @@ def garment_from_internal(stage: Usd.Stage, garment_path: str | Sdf.Path, times:
             f"{_where(stage, prim)}: its local-to-world transform is singular at some time code "
             f"in [{times.min():g}, {times.max():g}]; remove zero scales"
         ) from None
+
+
+def garment_points_internal(stage: Usd.Stage, garment_path: str | Sdf.Path, time: float) -> np.ndarray:
+    """A garment Mesh's points at one time code, in cloth_usd's internal frame (Y-up metres).
+
+    Args:
+        garment_path: path of the garment Mesh prim.
+        time: the time code.
+
+    Returns:
+        (N, 3) float64.
+    """
+    pts = np.asarray(UsdGeom.Mesh(stage.GetPrimAtPath(garment_path)).GetPointsAttr().Get(float(time)),
+                     dtype=np.float64)
+    to_internal = np.linalg.inv(garment_from_internal(stage, garment_path, np.asarray([time], dtype=np.float64))[0])
+    return pts @ to_internal[:3, :3].T + to_internal[:3, 3]
 
 
 # ------------------------------------------------------------------------- helpers
