@@ -57,7 +57,7 @@ _EXCLUDE = {"__pycache__", "docs", "README.md"}
 
 
 def cloth_usd_version() -> str:
-    text = (ROOT / "cloth_usd" / "__init__.py").read_text(encoding="utf-8")
+    text = (ROOT / "cloth_usd" / "_version.py").read_text(encoding="utf-8")
     return re.search(r'^__version__ = "([^"]+)"', text, re.MULTILINE).group(1)
 
 
