@@ -46,7 +46,8 @@ from ..errors import ArgumentError, ClothUsdError
 from .data import Moments, Split, plan_batches
 from .physics import GarmentRest, Material, garment_energy, garment_rest
 from .train import (CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, TrainConfig, TrainResult, _atomic_text,
-                    _coarse_forward, _detail_forward, _record_epoch, _step, _Tensors, build_model, plot_history)
+                    _coarse_forward, _detail_forward, _record_epoch, _start_epoch, _step, _Tensors, build_model,
+                    plot_history)
 
 __all__ = ["PhysicsClip", "PhysicsSet", "physics_set", "train_physics", "PHYSICS_FIT", "OUTPUT_SCALE"]
 
@@ -310,13 +311,7 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
     best_loss, best_epoch = math.inf, -1
     for epoch in range(config.epochs):
         began = time.perf_counter()
-        lr = config.lr * config.lr_decay ** epoch
-        for group in optimizer.param_groups:
-            group["lr"] = lr
-        batches = plan_batches(train_clips, config.batch, np.random.default_rng([config.seed, epoch]))
-        if config.max_batches:
-            batches = batches[:config.max_batches]
-        model.train()
+        lr, batches = _start_epoch(model, optimizer, train_clips, config, epoch)
         total = 0.0
         for k, frames in batches:
             clip = train_clips[k]

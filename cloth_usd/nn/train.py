@@ -560,6 +560,20 @@ def _validate(model, examples: _Examples, clips: Sequence[Clip], config: TrainCo
     return loss_sum / count, err_sum / count * 1000.0
 
 
+def _start_epoch(model: torch.nn.Module, optimizer: torch.optim.Optimizer, clips: Sequence, config: TrainConfig,
+                 epoch: int) -> tuple[float, list[tuple[int, np.ndarray]]]:
+    """Set epoch ``epoch``'s learning rate (``lr * lr_decay ** epoch``) and training mode; its
+    batches, shuffled by ``(seed, epoch)`` and cut to ``max_batches``. Returns ``(lr, batches)``."""
+    lr = config.lr * config.lr_decay ** epoch
+    for group in optimizer.param_groups:
+        group["lr"] = lr
+    batches = plan_batches(clips, config.batch, np.random.default_rng([config.seed, epoch]))
+    if config.max_batches:
+        batches = batches[:config.max_batches]
+    model.train()
+    return lr, batches
+
+
 def _step(model: torch.nn.Module, optimizer: torch.optim.Optimizer, loss: torch.Tensor, grad_clip: float) -> float:
     """One optimisation step on ``loss`` (gradient norm clipped to ``grad_clip`` unless 0); its value."""
     optimizer.zero_grad(set_to_none=True)
@@ -700,13 +714,7 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
 
     for epoch in range(start, config.epochs):
         began = time.perf_counter()
-        lr = config.lr * config.lr_decay ** epoch
-        for group in optimizer.param_groups:
-            group["lr"] = lr
-        batches = plan_batches(train_clips, config.batch, np.random.default_rng([config.seed, epoch]))
-        if config.max_batches:
-            batches = batches[:config.max_batches]
-        model.train()
+        lr, batches = _start_epoch(model, optimizer, train_clips, config, epoch)
         scale = model.output_scale
         total, steps = 0.0, 0
         for clip, f, a, _, t in examples.iterate(batches):
