@@ -22,7 +22,7 @@ import numpy as np
 #: Runs in the child: bake, then report its own peak RSS [MiB] (Linux: ru_maxrss is KiB).
 CHILD = """
 import json, resource, sys, time
-from cloth_usd.baker import bake
+from cloth_usd.baking import bake
 began = time.perf_counter()
 result = bake(sys.argv[1], sys.argv[2], frames=sys.argv[3], tier=sys.argv[4], models=sys.argv[5] or None,
               force=True)

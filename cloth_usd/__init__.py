@@ -19,7 +19,7 @@ from .errors import ClothUsdError
 
 def __getattr__(name: str) -> Any:
     if name == "bake":
-        from .baker import bake
+        from .baking import bake
 
         return bake
     if name == "inspect_stage":

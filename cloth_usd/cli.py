@@ -97,7 +97,8 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("scene", help="USD stage or shot layer to read, or a data set shard (.npz)")
     r.add_argument("-o", "--output", required=True, help="PNG to write")
     r.add_argument("--frames", required=True,
-                   help="comma-separated time codes, e.g. 1001,1030,1060 (frame indices for a shard)")
+                   help="START:END[:STEP] (inclusive, as for bake), or a comma list of time codes and ranges, "
+                        "e.g. 1001:1096:24 or 1001,1030,1060 (frame indices for a shard)")
     r.add_argument("--view", default="three-quarter", help="front, side or three-quarter")
     r.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
 
@@ -167,17 +168,15 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _render(args: argparse.Namespace) -> int:
-    from .errors import ArgumentError
-    from .render import render_frames, render_shard
+    from .core.frame_range import parse_time_codes
+    from .render import render_frames, render_shard, shard_frames
 
-    shard = args.scene.endswith(".npz")
-    try:
-        frames = [(int if shard else float)(f) for f in args.frames.split(",")]
-    except ValueError:
-        raise ArgumentError(f"--frames '{args.frames}': expected comma-separated "
-                            f"{'frame indices' if shard else 'time codes'}") from None
-    draw = render_shard if shard else render_frames
-    out = draw(args.scene, frames, args.output, body_model=args.body_model, view=args.view)
+    times = parse_time_codes(args.frames)
+    if args.scene.endswith(".npz"):
+        out = render_shard(args.scene, shard_frames(times, args.frames), args.output, body_model=args.body_model,
+                           view=args.view)
+    else:
+        out = render_frames(args.scene, times, args.output, body_model=args.body_model, view=args.view)
     sys.stdout.write(f"wrote {out}\n")
     return 0
 
@@ -199,11 +198,20 @@ def _inspect(args: argparse.Namespace) -> int:
     return 1 if report.problems else 0
 
 
-def _bake(args: argparse.Namespace) -> int:
-    from .baker import bake
+def _frames_and_tier(args: argparse.Namespace):
+    """``--tier`` and ``--frames`` parsed once, here at the edge: ``(FrameRange | None, Tier | None)``."""
+    from .baking import parse_frames, parse_tier
 
-    result = bake(args.scene, args.output, shot=args.shot, frames=args.frames, garments=args.garment,
-                  tier=args.tier, force=args.force, body_model=args.body_model, models=args.models,
+    tier = parse_tier(args.tier)
+    return (None if args.frames is None else parse_frames(args.frames)), tier
+
+
+def _bake(args: argparse.Namespace) -> int:
+    from .baking import bake
+
+    frames, tier = _frames_and_tier(args)
+    result = bake(args.scene, args.output, shot=args.shot, frames=frames, garments=args.garment,
+                  tier=tier, force=args.force, body_model=args.body_model, models=args.models,
                   joint_map=args.joint_map, progress=not args.no_progress and sys.stderr.isatty(),
                   strict=args.strict)
     try:
@@ -250,7 +258,8 @@ def _summary_failed(exc: OSError, written: list[str]) -> ClothUsdError:
 def _batch(args: argparse.Namespace) -> int:
     from .batch import describe_jobs, load_jobs, run_batch
 
-    jobs = load_jobs(args.jobs, out_dir=args.out_dir, frames=args.frames, garments=args.garment, tier=args.tier,
+    frames, tier = _frames_and_tier(args)
+    jobs = load_jobs(args.jobs, out_dir=args.out_dir, frames=frames, garments=args.garment, tier=tier,
                      models=args.models, body_model=args.body_model, joint_map=args.joint_map, strict=args.strict)
     if args.dry_run:
         sys.stdout.write("".join(line + "\n" for line in describe_jobs(jobs)))

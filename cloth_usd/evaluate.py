@@ -198,7 +198,8 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
     runs: list[tuple[str, tuple, CoarseBase, Heading]] = []  # (label, models for run_tiers, their base, heading)
     ablations: dict[str, dict] = {}
     if ablation_runs:
-        from .nn.train import BEST, load_run, pick_device, torch_coarse_fn, torch_detail_fn
+        from .nn.inference import pick_device, torch_coarse_fn, torch_detail_fn
+        from .nn.runs import BEST, load_run
 
         dev = pick_device(device)
 

@@ -8,7 +8,8 @@ shaped by the betas, ``smpl:betas``, ``smpl:gender``), its SkelAnimation
 ``/Character/Skeleton/Motion`` and, for each garment file, the garment Mesh referenced
 under ``/Character`` with ``cloth:body`` bound to the Skeleton, so that ``cloth-usd
 bake`` bakes the shot as it is. The stage is Y up, in metres, at ``fps`` frames per
-second, time codes ``start, start + 1, ...``.
+second, time codes ``start, start + 1, ...``. The USD reading and authoring is
+:mod:`cloth_usd.usd.motion_stage`'s.
 
 Shape letters: T frames.
 """
@@ -18,7 +19,6 @@ from __future__ import annotations
 import logging
 import os
 import re
-import tempfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,8 +26,12 @@ from pathlib import Path
 import numpy as np
 
 from ._version import __version__
+from .core.body import load_body_model, shape_body
+from .core.joint_names import as_joint_map
 from .core.smpl import JOINT_NAMES, NUM_BETAS
-from .errors import ArgumentError, GarmentError, MotionFileError, OutputWriteError, SceneError
+from .errors import ArgumentError, MotionFileError
+from .usd.motion_stage import GarmentSource, read_garment_source, write_motion_stage
+from .usd.write import check_output_path
 
 __all__ = ["DEFAULT_FPS", "DEFAULT_START", "ImportResult", "import_motion", "parse_betas", "parse_source_frames"]
 
@@ -153,9 +157,7 @@ def import_motion(
         OutputExistsError: ``output`` exists and ``force`` is false.
         ArgumentError, GarmentError: a bad argument or garment file.
     """
-    from .core.body import load_body_model, shape_body
     from .datagen.motion import resample
-    from .usd.write import check_output_path
 
     source = Path(source)
     if source.suffix.lower() not in _SUFFIXES:
@@ -191,8 +193,11 @@ def import_motion(
         poses, root = resample(poses, root, rate, out_fps)
         rig = "amass"
     times = float(start) + np.arange(len(poses), dtype=np.float64)
-    paths = _write_stage(output, source, rig, used, poses, joints[0] + root, times, out_fps, shape, gender,
-                         joints, sources)
+    provenance = {"cloth_usd": {"tool_version": __version__, "imported_from": source.name, "rig": rig,
+                                "source_frames": f"{used[0]}:{used[1]}"}}
+    paths = write_motion_stage(output, skeleton_path=SKELETON_PATH, poses=poses, root_positions=joints[0] + root,
+                               times=times, fps=out_fps, betas=shape, gender=gender, joints=joints,
+                               garments=sources, custom_data=provenance)
     log.info("%s: %s, file frames %d:%d -> %d frames at %g fps in %s", source, rig, used[0], used[1],
              len(times), out_fps, output)
     return ImportResult(output=output, rig=rig, source_frames=used, frames=len(times), fps=out_fps,
@@ -202,7 +207,6 @@ def import_motion(
 def _bvh_motion(source: Path, joints: np.ndarray, fps: float, frames: tuple[int, int] | None, joint_map
                 ) -> tuple[np.ndarray, np.ndarray, str, tuple[int, int]]:
     """Poses (T, 72) [rad], root offsets (T, 3) [m], the rig's name and the frames used."""
-    from .core.joint_names import as_joint_map
     from .datagen.bvh import BVH_RIGS, read_bvh, retarget_bvh, rig_mapping, trim_bvh
 
     bvh = read_bvh(source)
@@ -275,58 +279,18 @@ def _amass_motion(source: Path, frames: tuple[int, int] | None
 
 
 # ------------------------------------------------------------------------- garments
-@dataclass(frozen=True)
-class _GarmentSource:
-    file: Path
-    prim_paths: tuple[str, ...]
-    """Garment Mesh prims in ``file``."""
-    to_internal: tuple[np.ndarray, ...]
-    """(4, 4) per prim: its parent's space -> the internal frame (column convention)."""
-    betas: tuple[np.ndarray | None, ...]
-    """Per prim: ``smpl:betas`` of its ``cloth:body`` skeleton in ``file``, None if unauthored."""
+def _garment_source(path: Path) -> GarmentSource:
+    """A garment file's garments, their skeletons' betas checked."""
+    src = read_garment_source(path)
+    for body, betas in zip(src.body_paths, src.betas):
+        if betas is not None:
+            _check_betas(betas, f"{body}.smpl:betas")
+    return src
 
 
-def _garment_source(path: Path) -> _GarmentSource:
-    from pxr import Usd, UsdGeom
-
-    from .usd.read import open_stage, stage_to_internal
-
-    if not path.is_file():
-        raise ArgumentError(f"--garment {path}: no such file")
-    try:
-        stage = open_stage(path)
-    except SceneError as exc:
-        raise GarmentError(f"--garment {path}: {exc}") from None
-    meshes = [p for p in stage.Traverse() if p.IsA(UsdGeom.Mesh) and p.HasAttribute("cloth:category")]
-    default = stage.GetDefaultPrim()
-    chosen = [default] if default and default in meshes else meshes
-    if not chosen:
-        raise GarmentError(f"--garment {path}: holds no garment (a Mesh with a cloth:category attribute, "
-                           "e.g. one written by cloth_usd.usd.author.author_garment)")
-    cache = UsdGeom.XformCache(Usd.TimeCode.EarliestTime())
-    s2i = stage_to_internal(stage)
-    to_internal, betas = [], []
-    for prim in chosen:
-        parent = prim.GetParent()
-        world = np.eye(4) if parent.IsPseudoRoot() else np.array(cache.GetLocalToWorldTransform(parent)).T
-        to_internal.append(s2i @ world)
-        betas.append(_body_betas(stage, prim))
-    return _GarmentSource(file=path, prim_paths=tuple(str(p.GetPath()) for p in chosen),
-                          to_internal=tuple(to_internal), betas=tuple(betas))
-
-
-def _body_betas(stage, prim) -> np.ndarray | None:
-    rel = prim.GetRelationship("cloth:body")
-    targets = rel.GetTargets() if rel else []
-    body = stage.GetPrimAtPath(targets[0]) if len(targets) == 1 else None
-    attr = body.GetAttribute("smpl:betas") if body else None
-    value = attr.Get() if attr and attr.HasAuthoredValue() else None
-    return None if value is None else _check_betas(list(value), f"{body.GetPath()}.smpl:betas")
-
-
-def _garment_betas(sources: Sequence[_GarmentSource]) -> np.ndarray:
+def _garment_betas(sources: Sequence[GarmentSource]) -> np.ndarray:
     """The betas the garments were made for (they must agree), or zeros."""
-    found = [(s.file, b) for s in sources for b in s.betas if b is not None]
+    found = [(s.file, _check_betas(b, "")) for s in sources for b in s.betas if b is not None]
     for file, b in found[1:]:
         if not np.allclose(b, found[0][1], atol=1e-6):
             raise ArgumentError(f"--garment {found[0][0]} and {file} were made for different bodies "
@@ -335,58 +299,3 @@ def _garment_betas(sources: Sequence[_GarmentSource]) -> np.ndarray:
         log.info("betas %s from the garments' skeleton", np.round(found[0][1], 3).tolist())
         return found[0][1]
     return np.zeros(NUM_BETAS)
-
-
-# ------------------------------------------------------------------------- writing
-def _write_stage(output: Path, source: Path, rig: str, used: tuple[int, int], poses: np.ndarray,
-                 root_positions: np.ndarray, times: np.ndarray, fps: float, betas: np.ndarray, gender: str,
-                 joints: np.ndarray, sources: Sequence[_GarmentSource]) -> tuple[str, ...]:
-    """Author the shot in memory and write it atomically; returns the garments' prim paths."""
-    from pxr import Gf, Sdf, Usd, UsdGeom
-
-    from .usd.author import author_skeleton, set_stage_metadata
-
-    stage = Usd.Stage.CreateInMemory()
-    set_stage_metadata(stage, up_axis="Y", meters_per_unit=1.0, fps=fps, start=times[0], end=times[-1])
-    skel = author_skeleton(stage, SKELETON_PATH, joint_positions=joints, betas=betas, gender=gender,
-                           poses=poses, root_positions=root_positions, times=times)
-    stage.SetDefaultPrim(stage.GetPrimAtPath("/Character"))
-    taken = {"Skeleton"}
-    placed: list[str] = []
-    for src in sources:
-        asset = os.path.relpath(src.file.resolve(), output.resolve().parent).replace(os.sep, "/")
-        for prim_path, to_internal in zip(src.prim_paths, src.to_internal):
-            name = _unique(Sdf.Path(prim_path).name, taken)
-            parent = Sdf.Path("/Character")
-            if not np.allclose(to_internal, np.eye(4), atol=1e-9):  # the garment's units or axes differ
-                xf = UsdGeom.Xform.Define(stage, parent.AppendChild(name + "_space"))
-                xf.MakeMatrixXform().Set(Gf.Matrix4d(to_internal.T.tolist()))
-                parent = xf.GetPath()
-            prim = stage.DefinePrim(parent.AppendChild(name))
-            prim.GetReferences().AddReference(asset, Sdf.Path(prim_path))
-            prim.CreateRelationship("cloth:body", custom=True).SetTargets([Sdf.Path(skel)])
-            placed.append(str(prim.GetPath()))
-    layer = stage.GetRootLayer()
-    layer.customLayerData = {"cloth_usd": {
-        "tool_version": __version__, "imported_from": source.name, "rig": rig,
-        "source_frames": f"{used[0]}:{used[1]}",
-    }}
-    fd, tmp = tempfile.mkstemp(prefix=f".{output.stem}.", suffix=f".tmp{output.suffix}", dir=output.parent)
-    os.close(fd)
-    try:
-        if not layer.Export(tmp):
-            raise OutputWriteError(f"{output}: USD could not write the stage (to {tmp}); check the folder's "
-                                   "permissions and free space")
-        os.replace(tmp, output)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-    return tuple(placed)
-
-
-def _unique(name: str, taken: set[str]) -> str:
-    out, k = name, 1
-    while out in taken or out + "_space" in taken:
-        out, k = f"{name}_{k}", k + 1
-    taken.add(out)
-    return out

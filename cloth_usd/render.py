@@ -14,9 +14,11 @@ import numpy as np
 
 from .core.body import lbs, load_body_model, shape_body
 from .core.frames import canonical_motion
-from .errors import ClothUsdError
+from .core.shards import read_shard
+from .errors import ArgumentError, OutputWriteError
+from .usd.read import garment_points_internal, open_stage, read_motion, read_scene
 
-__all__ = ["draw_panels", "posed_bodies", "render_frames", "render_shard"]
+__all__ = ["draw_panels", "posed_bodies", "render_frames", "render_shard", "shard_frames"]
 
 BODY_RGB = (0.85, 0.68, 0.58)
 GARMENT_RGB = (0.25, 0.45, 0.75)
@@ -45,7 +47,7 @@ def draw_panels(panels: Sequence[tuple[str, list[tuple[np.ndarray, tuple[float, 
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
     if view not in _VIEWS:
-        raise ClothUsdError(f"--view '{view}': unknown (valid: {', '.join(_VIEWS)})")
+        raise ArgumentError(f"--view '{view}': unknown (valid: {', '.join(_VIEWS)})")
     fig = plt.figure(figsize=(size[0] * len(panels), size[1]), dpi=100)
     light = np.array([0.3, 0.5, 0.8]) / np.linalg.norm([0.3, 0.5, 0.8])
     for i, (title, meshes) in enumerate(panels):
@@ -65,8 +67,12 @@ def draw_panels(panels: Sequence[tuple[str, list[tuple[np.ndarray, tuple[float, 
         ax.set_axis_off()
         ax.set_title(title)
     output = Path(output)
-    fig.savefig(output, bbox_inches="tight")
-    plt.close(fig)
+    try:
+        fig.savefig(output, bbox_inches="tight")
+    except OSError as exc:
+        raise OutputWriteError(f"-o {output}: cannot write the PNG ({exc.strerror or exc})") from None
+    finally:
+        plt.close(fig)
     return output
 
 
@@ -80,8 +86,6 @@ def posed_bodies(stage, scene, times: Sequence[float], *, body_model: str | Path
     Returns:
         per character ``(vertices (T, V, 3) float64 [m], faces (F, 3) int)``.
     """
-    from .usd.read import read_motion
-
     times = np.asarray(times, dtype=np.float64)
     out = []
     for char in scene.characters:
@@ -95,11 +99,13 @@ def posed_bodies(stage, scene, times: Sequence[float], *, body_model: str | Path
 def render_frames(stage_path: str | Path, frames: Sequence[float], output: str | Path, *,
                   body_model: str | Path | None = None, view: str = "three-quarter",
                   size: tuple[float, float] = (4.0, 5.0)) -> Path:
-    """Draw body and garments at each frame side by side into one PNG."""
-    from .usd.read import garment_points_internal, open_stage, read_scene
+    """Draw body and garments at each frame side by side into one PNG.
 
+    Args:
+        frames: (T,) time codes (:func:`~cloth_usd.core.frame_range.parse_time_codes`).
+    """
     if view not in _VIEWS:
-        raise ClothUsdError(f"--view '{view}': unknown (valid: {', '.join(_VIEWS)})")
+        raise ArgumentError(f"--view '{view}': unknown (valid: {', '.join(_VIEWS)})")
     stage = open_stage(stage_path)
     scene = read_scene(stage)
     times = np.asarray(frames, dtype=np.float64)
@@ -114,17 +120,27 @@ def render_frames(stage_path: str | Path, frames: Sequence[float], output: str |
     return draw_panels(panels, output, view=view, size=size)
 
 
+def shard_frames(times: Sequence[float], text: str) -> list[int]:
+    """A shard's frame indices from parsed ``--frames`` values (``text``, to name them).
+
+    Raises:
+        ArgumentError: a value that is not a whole number.
+    """
+    bad = [t for t in times if not float(t).is_integer()]
+    if bad:
+        raise ArgumentError(f"--frames '{text}': a shard's frames are indices (whole numbers), not {bad[0]:g}")
+    return [int(t) for t in times]
+
+
 def render_shard(shard_path: str | Path, frames: Sequence[int], output: str | Path, *,
                  body_model: str | Path | None = None, view: str = "three-quarter",
                  size: tuple[float, float] = (4.0, 5.0)) -> Path:
     """Draw a simulated sequence of the data factory (a shard) at some frame indices."""
-    from .core.shards import read_shard
-
     shard = read_shard(shard_path)
     count = shard.positions.shape[0]
     bad = [f for f in frames if not 0 <= int(f) < count]
     if bad:
-        raise ClothUsdError(f"--frames {bad}: {shard_path} has frames 0-{count - 1}")
+        raise ArgumentError(f"--frames {bad}: {shard_path} has frames 0-{count - 1}")
     body = load_body_model(body_model)
     v_shaped, joints = shape_body(body, shard.betas)
     idx = np.asarray(frames, dtype=np.int64)

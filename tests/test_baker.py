@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd, UsdGeom
 
-from cloth_usd.baker import FrameRange, bake, parse_frames
+from cloth_usd.baking import bake
 from cloth_usd.core.body import load_body_model, shape_body
 from cloth_usd.datagen import TShirtParams, make_tshirt, walk_cycle
 from cloth_usd.usd.author import author_garment, author_skeleton, set_stage_metadata
@@ -81,21 +81,6 @@ def test_garment_tier_override_is_honoured(tmp_path, character):
     assert result.garments[0].tier.value == "detail" and result.garments[0].bundle is not None
 
 
-def test_frame_ranges():
-    assert parse_frames("1:5:2").times().tolist() == [1.0, 3.0, 5.0]
-    assert parse_frames("1001:1001").times().tolist() == [1001.0]
-    assert FrameRange(0.0, 1.0, 0.25).times().tolist() == [0.0, 0.25, 0.5, 0.75, 1.0]
-
-
-def test_a_negative_step_says_step_must_be_positive():
-    from cloth_usd.errors import ArgumentError
-
-    for text in ("1:5:-1", "1:5:0"):
-        with pytest.raises(ArgumentError, match=rf"--frames '{text}': STEP must be positive"):
-            parse_frames(text)
-    assert FrameRange(1.0, 5.0, 2.0).count() == 3
-
-
 def test_shot_and_output_naming_one_file_are_refused_up_front(tmp_path, character):
     import os
 
@@ -112,7 +97,7 @@ def test_shot_and_output_naming_one_file_are_refused_up_front(tmp_path, characte
 
 
 def test_a_cache_too_large_is_refused_before_anything_is_computed(tmp_path, character):
-    from cloth_usd.baker import cache_bytes
+    from cloth_usd.baking import cache_bytes
     from cloth_usd.errors import ArgumentError
 
     scene = _stage(tmp_path / "s.usda", character)
@@ -140,7 +125,7 @@ def test_bake_removes_the_stale_temporary_files_of_its_targets(tmp_path, charact
 def test_betas_beyond_the_body_models_shape_components_are_an_error(tmp_path, character):
     from dataclasses import replace
 
-    from cloth_usd.baker import ModelCache
+    from cloth_usd.baking import ModelCache
     from cloth_usd.errors import BodyModelError
 
     scene = _stage(tmp_path / "s.usda", character)  # betas (1.0, -0.5, 0, ...)

@@ -13,10 +13,12 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd
 
-from cloth_usd.baker import bake
+from cloth_usd.baking import bake
 from cloth_usd.batch import KILL_HOOK_ENV, Job, JobStatus, load_jobs, run_batch
 from cloth_usd.cli import main
 from cloth_usd.core.body import load_body_model, shape_body
+from cloth_usd.core.frame_range import FrameRange
+from cloth_usd.core.scene import Tier
 from cloth_usd.datagen import walk_cycle
 from cloth_usd.errors import ArgumentError
 from cloth_usd.usd.author import author_garment, author_skeleton, set_stage_metadata
@@ -73,7 +75,7 @@ def shots(tmp_path_factory) -> Path:
 
 
 def _names(jobs) -> dict[str, Job]:
-    return {(j.stage.name, j.frames): j for j in jobs}
+    return {(j.stage.name, j.frames.spec()): j for j in jobs}
 
 
 def _check_outputs(jobs, out: Path) -> None:
@@ -81,7 +83,7 @@ def _check_outputs(jobs, out: Path) -> None:
     for job in jobs:
         layer = Sdf.Layer.OpenAsAnonymous(str(job.output))
         garments = 2 if job.stage.name == "shot_d.usda" else 1
-        lo, hi, *step = map(int, job.frames.split(":"))
+        lo, hi, *step = map(int, job.frames.spec().split(":"))
         want = list(range(lo, hi + 1, step[0] if step else 1))
         for g in range(garments):
             attr = f"/Char/Tube{g}.points"
@@ -164,7 +166,7 @@ def test_batch_survives_killed_workers_and_reruns_skip(shots, tmp_path, monkeypa
     assert status.pop(broken.name) is JobStatus.DONE
     assert set(status.values()) == {JobStatus.SKIPPED}
     assert all(j.output.stat().st_mtime_ns == mtimes[j.output] for j in jobs if j is not broken)
-    forced = run_batch([Job(**{**changed.__dict__, "tier": "skinning", "frames": "4:7"})], workers=1)
+    forced = run_batch([Job(**{**changed.__dict__, "tier": Tier.SKINNING, "frames": FrameRange(4, 7)})], workers=1)
     assert forced.jobs[0].status is JobStatus.DONE  # same output path, other frames: not up to date
     print(f"24 jobs, 2 local workers, {len(kills)} workers killed: {seconds:.1f} s; re-run {again.seconds:.1f} s")
 
@@ -180,7 +182,7 @@ def test_ray_runs_the_same_batch_with_killed_workers(shots, tmp_path, monkeypatc
 
 
 def test_a_task_killed_on_every_attempt_fails_its_job_alone_and_leaves_no_layer(shots, tmp_path, monkeypatch):
-    jobs = [Job(name=f"j{i}", stage=shots / "shot_a.usda", output=tmp_path / f"j{i}.usdc", frames=f"{i}:{i + 1}")
+    jobs = [Job(name=f"j{i}", stage=shots / "shot_a.usda", output=tmp_path / f"j{i}.usdc", frames=FrameRange(i, i + 1))
             for i in (1, 2, 3)]
     (tmp_path / "kill").mkdir()
     (tmp_path / "kill" / "j2.bake.kill").write_text("write")
@@ -231,8 +233,9 @@ def test_load_jobs_from_a_txt_a_glob_and_a_toml(shots, tmp_path):
     assert jobs[0].bake_command()[:5] == ["cloth-usd", "bake", str(tmp_path / "x" / "scene.usda"), "-o",
                                           str(tmp_path / "o" / "x_scene.skinning.all.usdc")]
     toml = load_jobs(shots / "jobs.toml")
-    assert len(toml) == 24 and toml[5].frames == "1:11:2" and toml[5].output.name == "shot_a.skinning.1-11x2.usdc"
-    assert toml[0].output.parent == shots / "out" and toml[0].tier == "skinning"
+    assert len(toml) == 24 and toml[5].frames == FrameRange(1, 11, 2)
+    assert toml[5].output.name == "shot_a.skinning.1-11x2.usdc"
+    assert toml[0].output.parent == shots / "out" and toml[0].tier is Tier.SKINNING
 
 
 @pytest.mark.parametrize("text, message", [
@@ -264,8 +267,10 @@ def test_a_worker_cache_loads_each_model_once_and_binds_each_garment_once(shots,
     (and sha256 check), one binding per garment."""
     from test_extremes import fake_bundle
 
-    import cloth_usd.baker as baker
+    import cloth_usd.baking.cache as baking_cache
+    import cloth_usd.baking.garment as baking_garment
     import cloth_usd.runtime.bundle as bundles
+    from cloth_usd.baking import ModelCache
 
     calls = {"body": 0, "bundle": 0, "bind": 0}
 
@@ -275,11 +280,11 @@ def test_a_worker_cache_loads_each_model_once_and_binds_each_garment_once(shots,
             return fn(*args, **kwargs)
         return wrapper
 
-    monkeypatch.setattr(baker, "load_body_model", counting("body", baker.load_body_model))
+    monkeypatch.setattr(baking_cache, "load_body_model", counting("body", baking_cache.load_body_model))
     monkeypatch.setattr(bundles, "load_bundle", counting("bundle", bundles.load_bundle))
-    monkeypatch.setattr(baker, "bind_garment", counting("bind", baker.bind_garment))
+    monkeypatch.setattr(baking_garment, "bind_garment", counting("bind", baking_garment.bind_garment))
     models = fake_bundle(tmp_path / "fake", 0.005)
-    cache = baker.ModelCache()
+    cache = ModelCache()
     for i, frames in enumerate(["1:4", "5:8", "9:12"]):
         bake(shots / "shot_d.usda", tmp_path / f"{i}.usdc", frames=frames, tier="coarse", models=models, cache=cache)
     assert calls == {"body": 1, "bundle": 1, "bind": 2}  # shot_d wears two garments
@@ -298,8 +303,8 @@ def test_ray_executor_without_ray_says_what_to_install(shots, monkeypatch):
     ("bug", False, "ValueError: a bug"),
 ])
 def test_a_task_says_whether_its_error_is_worth_a_retry(tmp_path, monkeypatch, error, retry, message):
-    import cloth_usd.baker
-    from cloth_usd.batch_tasks import Kind, Task, run_task
+    import cloth_usd.batch.tasks
+    from cloth_usd.batch.tasks import Kind, Outcome, Task, run_task
     from cloth_usd.errors import OutputWriteError
 
     raised = {"write": OutputWriteError("out.usdc: USD could not save the layer"),
@@ -309,11 +314,11 @@ def test_a_task_says_whether_its_error_is_worth_a_retry(tmp_path, monkeypatch, e
     def failing_bake(*args, **kwargs):
         raise raised
 
-    monkeypatch.setattr(cloth_usd.baker, "bake", failing_bake)
+    monkeypatch.setattr(cloth_usd.batch.tasks, "bake", failing_bake)
     job = Job(name="j", stage=tmp_path / "s.usda", output=tmp_path / "out.usdc")
     out = run_task(Task(Kind.BAKE, job, job.output))
-    assert (out["status"], out["retry"]) == ("error", retry)
-    assert out["error"].startswith(message)
+    assert (out.status, out.retry) == (Outcome.ERROR, retry)
+    assert out.error.startswith(message)
 
 
 def test_jobs_carry_a_joint_map_and_strict_to_their_bakes(shots, tmp_path, capsys):

@@ -210,7 +210,7 @@ def test_python_api(tmp_path):
 
 def test_render_draws_a_stage_and_names_a_bad_view(tmp_path, capsys):
     png = tmp_path / "walk.png"
-    assert main(["render", str(WALK), "-o", str(png), "--frames", "1001,1030"]) == 0
+    assert main(["render", str(WALK), "-o", str(png), "--frames", "1001:1030:29"]) == 0  # as bake's: 1001, 1030
     assert png.stat().st_size > 1000
     assert main(["render", str(WALK), "-o", str(png), "--frames", "1001", "--view", "top"]) == 2
     assert "--view 'top': unknown" in capsys.readouterr().err
@@ -218,12 +218,12 @@ def test_render_draws_a_stage_and_names_a_bad_view(tmp_path, capsys):
 
 _SLOW_BAKE = """
 import sys, time
-import cloth_usd.baker as baker
-real = baker.skin_garment
+import cloth_usd.baking.garment as garment
+real = garment.skin_garment
 def slow(*args, **kwargs):  # a long shot, without its memory
     time.sleep(0.5)
     return real(*args, **kwargs)
-baker.skin_garment = slow
+garment.skin_garment = slow
 from cloth_usd.cli import main
 sys.exit(main(sys.argv[1:]))
 """

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from pxr import Sdf, Usd
 
-from cloth_usd.baker import bake
+from cloth_usd.baking import bake
 from cloth_usd.core.guard import GuardLimits
 from cloth_usd.errors import GarmentError
 from cloth_usd.core.body import load_body_model, shape_body
@@ -117,7 +117,7 @@ def posed_stage(tmp_path_factory, body) -> Path:
 
 
 def _warnings(caplog) -> list[str]:
-    return [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING and r.name == "cloth_usd.baker"]
+    return [r.getMessage() for r in caplog.records if r.levelno == logging.WARNING and r.name.startswith("cloth_usd.baking")]
 
 
 def test_limits_match_the_data_factory():
@@ -126,7 +126,7 @@ def test_limits_match_the_data_factory():
 
 
 def test_poses_at_pi_and_past_the_limits_bake_finite_bounded_and_warn(posed_stage, body, tmp_path, caplog):
-    with caplog.at_level(logging.WARNING, logger="cloth_usd.baker"):
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
         result = bake(posed_stage, tmp_path / "c.usdc")
     pts = read_points(tmp_path / "c.usdc")
     assert pts.shape == (7, 192, 3) and np.isfinite(pts).all()
@@ -144,7 +144,7 @@ def test_poses_at_pi_and_past_the_limits_bake_finite_bounded_and_warn(posed_stag
 
 def test_learned_tier_at_extreme_poses_stays_finite_and_bounded(posed_stage, tmp_path, caplog):
     bundle = fake_bundle(tmp_path / "plausible", 0.005)
-    with caplog.at_level(logging.WARNING, logger="cloth_usd.baker"):
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
         result = bake(posed_stage, tmp_path / "c.usdc", tier="coarse", models=bundle)
     pts = read_points(tmp_path / "c.usdc")
     assert np.isfinite(pts).all()
@@ -156,7 +156,7 @@ def test_learned_tier_at_extreme_poses_stays_finite_and_bounded(posed_stage, tmp
 @pytest.mark.parametrize("scale, why", [(5.0, "a vertex 5.0"), (float("nan"), "not finite")])
 def test_a_wild_model_output_is_replaced_by_skinning_frame_by_frame(posed_stage, tmp_path, caplog, scale, why):
     bundle = fake_bundle(tmp_path / "wild", scale)
-    with caplog.at_level(logging.WARNING, logger="cloth_usd.baker"):
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
         result = bake(posed_stage, tmp_path / "c.usdc", tier="coarse", models=bundle, frames="1:3")
     pts = read_points(tmp_path / "c.usdc")
     bake(posed_stage, tmp_path / "s.usdc", frames="1:3")
@@ -184,7 +184,7 @@ def test_strict_refuses_a_frame_that_is_not_a_garment_and_writes_nothing(posed_s
 def test_betas_at_plus_minus_5_warn_and_stay_finite(body, tmp_path, caplog):
     betas = [5.0, -5.0, 5.0, -5.0, 5.0, -5.0, 5.0, -5.0, 5.0, -5.0]
     scene = write_stage(tmp_path / "s.usda", body, betas=betas)
-    with caplog.at_level(logging.WARNING, logger="cloth_usd.baker"):
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
         result = bake(scene, tmp_path / "c.usdc")
     assert np.isfinite(read_points(tmp_path / "c.usdc")).all()
     (message,) = [m for m in _warnings(caplog) if "beta" in m]
@@ -246,7 +246,7 @@ def odd_bundle(tmp_path_factory) -> Path:
 def test_odd_garments_bake_finite(body, tmp_path, caplog, name, tier, odd_bundle):
     scene = write_stage(tmp_path / "s.usda", body, garment=GARMENTS[name], frames=4)
     models = odd_bundle if tier == "coarse" else None
-    with caplog.at_level(logging.WARNING, logger="cloth_usd.baker"):
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
         result = bake(scene, tmp_path / "c.usdc", tier=tier, models=models)
     pts = read_points(tmp_path / "c.usdc")
     n = len(GARMENTS[name](shape_body(body, np.zeros(10))[1])[0])
@@ -291,7 +291,7 @@ def test_every_unit_and_up_axis_bakes_the_same_garment(body, tmp_path):
 
 LONG_SHOT = """
 import json, resource, sys
-from cloth_usd.baker import bake
+from cloth_usd.baking import bake
 rss = lambda: resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 bake(sys.argv[1], sys.argv[2], frames="1:100")
 short = rss()

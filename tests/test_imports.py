@@ -18,12 +18,11 @@ def test_package_import_is_cheap():
 
 
 def test_bake_path_needs_no_torch():
-    assert "torch" not in _loaded_after("import cloth_usd.baker, cloth_usd.usd.write, cloth_usd.cli")
+    assert "torch" not in _loaded_after("import cloth_usd.baking, cloth_usd.batch, cloth_usd.usd.write, cloth_usd.cli")
 
 
-#: Modules outside cloth_usd/usd that still import pxr inside functions, to be moved there.
-#: cloth_usd/motion_import.py reads garment stages and authors the imported shot with pxr.
-_PXR_OUTSIDE_USD = {"motion_import.py"}
+#: Modules outside cloth_usd/usd that import pxr (none: keep it so).
+_PXR_OUTSIDE_USD: set[str] = set()
 
 
 def test_only_the_usd_package_imports_pxr():

@@ -24,7 +24,7 @@ __all__ = [
 ]
 
 _LAZY = {"export_coarse": "export", "export_detail": "export", "export_bundle": "export",
-         "TrainConfig": "train", "load_run": "train"}
+         "TrainConfig": "config", "load_run": "runs"}
 
 
 def __getattr__(name: str):

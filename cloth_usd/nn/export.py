@@ -93,7 +93,7 @@ def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | N
     from ..core.pipeline import run_tiers
     from ..runtime.io import coarse_inputs, detail_inputs
     from ..runtime.session import ModelSession
-    from .train import torch_coarse_fn, torch_detail_fn
+    from .inference import torch_coarse_fn, torch_detail_fn
 
     sessions = {"coarse": ModelSession(coarse_onnx, prefer_gpu=False)}
     if detail_onnx is not None:
@@ -163,7 +163,8 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
     from ..errors import ArgumentError, ClothUsdError
     from ..runtime.bundle import load_bundle, write_bundle
     from .data import FIT, Split, load_dataset
-    from .train import BEST, CoarseInput, load_run
+    from .config import CoarseInput
+    from .runs import BEST, load_run
 
     log = logging.getLogger(__name__)
     data_dir = Path(data_dir)

@@ -292,7 +292,7 @@ def test_inspect_names_a_skipped_skeleton_and_what_to_do(tmp_path, capsys):
 
 def test_the_joint_map_is_part_of_the_bake_digest(tmp_path):
     """A cache baked through one map is not 'up to date' for a bake through another."""
-    from cloth_usd.baker import bake_plan
+    from cloth_usd.baking import bake_plan
 
     custom = _renamed_walk(tmp_path, CUSTOM)
     names = dict(zip(CUSTOM, JOINT_NAMES))

@@ -13,8 +13,8 @@ import os
 import time
 from typing import Any
 
-from .batch_tasks import KILL_HOOK_ENV, Event, Task, run_task
-from .errors import ArgumentError
+from ..errors import ArgumentError
+from .tasks import KILL_HOOK_ENV, Event, Task, run_task
 
 __all__ = ["RayPool"]
 

@@ -1,0 +1,184 @@
+"""One garment's frames: skinned, the learned tier evaluated and guarded, written a batch
+at a time. Shape letters: T frames, N garment vertices, E edges."""
+
+from __future__ import annotations
+
+import logging
+from typing import Any, Callable, Sequence
+
+import numpy as np
+from tqdm.auto import tqdm
+
+from ..core.body import BodyModel
+from ..core.frames import CanonicalMotion
+from ..core.graph import directed_edges
+from ..core.guard import GuardLimits, check_frames
+from ..core.limits import BETA_LIMIT, betas_outside, pose_outliers
+from ..core.provenance import GarmentReport
+from ..core.scene import Character, Garment, Tier
+from ..core.skinning import SkinBinding, bind_garment, skin_garment
+from ..errors import GarmentError
+from ..runtime.bundle import ModelBundle
+from ..runtime.garment import LearnedGarment
+from .cache import ModelCache, garment_key
+
+__all__ = ["FAR_FROM_BODY", "LEARNED_BATCH_VERTICES", "range_notes", "bake_garment"]
+
+log = logging.getLogger(__name__)
+
+#: A garment whose rest vertices lie further than this from the body surface on
+#: average [m] is warned about: its ``cloth:body`` may target the wrong character.
+FAR_FROM_BODY = 0.10
+#: Garment vertices per learned-model call when ``bake(batch_size=None)``: the model's
+#: activations grow with frames x vertices (about 100 MiB per 4000-vertex frame at width 0.125).
+LEARNED_BATCH_VERTICES = 16_000
+
+
+def range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray) -> list[str]:
+    """What in a character's shape and motion lies outside the trained range, one line each.
+
+    Args:
+        times: (T,) the time codes of ``motion``.
+    """
+    notes = []
+    outside = betas_outside(char.betas)
+    if outside.size:
+        listed = ", ".join(f"beta[{i}] = {char.betas[i]:g}" for i in outside)
+        notes.append(f"body <{char.prim_path}> has {listed}, outside the trained range "
+                     f"|beta| <= {BETA_LIMIT:g}, at every frame")
+    poses = pose_outliers(motion.poses)
+    if poses is not None:
+        first = times[poses.frames[0]]
+        notes.append(f"body <{char.prim_path}> is posed outside the trained joint limits at frame "
+                     f"{first:g} ({poses.joint} {poses.angle_deg:.0f} deg about {poses.axis}, trained "
+                     f"{poses.low_deg:.0f}..{poses.high_deg:.0f}) and at {poses.frames.size - 1} other "
+                     f"of {times.shape[0]} frames")
+    return notes
+
+
+def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, motion: CanonicalMotion,
+                 times: np.ndarray, tier: Tier, to_prim: np.ndarray, *, chunk: int, progress: bool,
+                 bundle: ModelBundle | None = None, batch_size: int | None = None,
+                 cache: ModelCache | None = None, notes: Sequence[str] = (), source: str = "",
+                 on_progress: Callable[[str, int, int], None] | None = None, strict: bool = False,
+                 guard: GuardLimits = GuardLimits()) -> GarmentReport:
+    """Evaluate one garment at every time code and add its points to ``writer``.
+
+    Args:
+        writer: the :class:`~cloth_usd.usd.write.CacheLayerWriter` of the cache.
+        times: (T,) time codes; motion: the character's motion at them.
+        to_prim: (T, 4, 4) float64 internal world frame -> the garment prim's local frame.
+        chunk: frames per batch (skinning tier; a learned tier uses ``batch_size``).
+        notes: what lies outside the trained range (:func:`range_notes`), warned about.
+        strict: a learned frame the guard rejects is a GarmentError instead of a fallback.
+    Raises:
+        GarmentError: non-finite points, or a rejected frame with ``strict``.
+    """
+    cache = cache or ModelCache()
+    where = f"{source} <{garment.prim_path}>"
+    rest = motion.rest_points(garment.rest_points)
+
+    def prepare() -> tuple[SkinBinding, Any]:
+        binding = bind_garment(body, char.betas, rest)
+        if tier is Tier.SKINNING:
+            return binding, None
+        return binding, LearnedGarment(bundle, body, char.betas, rest, garment.triangles, binding=binding)
+
+    binding, learned = cache.garment(garment_key(garment, body, char.betas, rest, tier, bundle), prepare)
+    warnings = [f"{where}: {note}" for note in notes]
+    distance = float(binding.association.distance.mean())
+    if distance > FAR_FROM_BODY:
+        warnings.append(f"{where}: the garment lies {distance:.2f} m from the body <{char.prim_path}> on "
+                        f"average at rest (a worn garment is within {FAR_FROM_BODY:g} m); check its "
+                        "cloth:body and rest points")
+    for w in warnings:
+        log.warning("%s", w)
+    poses, transl = motion.poses, motion.transl
+    num_t = times.shape[0]
+    if learned is not None:
+        if batch_size is None:
+            batch_size = max(1, min(16, LEARNED_BATCH_VERTICES // max(1, learned.num_vertices)))
+        chunk = batch_size
+    moved, max_disp, max_off = 0, 0.0, 0.0
+    edges = directed_edges(garment.triangles, binding.rest_points.shape[0])
+    edges = edges[edges[:, 0] < edges[:, 1]]
+    fallbacks: list[tuple[float, Tier, str]] = []  # (time code, tier used instead, why)
+    with tqdm(total=num_t, desc=garment.prim_path, unit="frame", disable=not progress,
+              leave=False) as bar:
+        for lo in range(0, num_t, chunk):
+            hi = min(lo + chunk, num_t)
+            skinned = skin_garment(binding, poses[lo:hi], transl[lo:hi], body.parents)
+            pts = skinned
+            if learned is not None:
+                frames = learned.evaluate(tier, poses[lo:hi], transl[lo:hi], batch_size=batch_size,
+                                          skinned=skinned)
+                pts, used = _guarded(learned, tier, frames.points, skinned, poses[lo:hi], transl[lo:hi], edges,
+                                     guard, batch_size)
+                for i, (replaced_by, why) in used.items():
+                    if strict:
+                        raise GarmentError(f"{where}: the {tier.value} tier's frame {times[lo + i]:g} is not a "
+                                           f"garment ({why}); --strict refuses it and nothing was written. Bake "
+                                           "without --strict to replace such frames by a safer tier")
+                    fallbacks.append((float(times[lo + i]), replaced_by, why))
+                max_off = max(max_off, float(np.linalg.norm(pts - skinned, axis=-1).max(initial=0.0)))
+                moved += int(frames.moved.sum())
+            bad = ~np.isfinite(pts).all(axis=(1, 2))
+            if bad.any():
+                raise GarmentError(f"{where}: the deformed points are not finite at frame "
+                                   f"{times[lo + int(np.argmax(bad))]:g} (tier {tier.value}); nothing "
+                                   "was written. Check the skeleton's animation at that frame")
+            disp = np.linalg.norm(pts - transl[lo:hi, None, :] - binding.rest_points, axis=-1)
+            max_disp = max(max_disp, float(disp.max()))
+            m = to_prim[lo:hi]
+            local = np.einsum("tab,tnb->tna", m[:, :3, :3], pts) + m[:, None, :3, 3]
+            writer.add_points(garment.prim_path, times[lo:hi], local)
+            bar.update(hi - lo)
+            if on_progress is not None:
+                on_progress(garment.prim_path, hi, num_t)
+    for replaced_by in (Tier.COARSE, Tier.SKINNING):
+        hits = [(t, why) for t, by, why in fallbacks if by is replaced_by]
+        if hits:
+            w = (f"{where}: {len(hits)} of {num_t} frames of the {tier.value} tier are not a garment and were "
+                 f"replaced by the {replaced_by.value} tier, first at frame {hits[0][0]:g} ({hits[0][1]})")
+            log.warning("%s", w)
+            warnings.append(w)
+    log.info("%s: %d vertices, %d frames, tier %s", garment.prim_path, binding.rest_points.shape[0],
+             num_t, tier.value)
+    return GarmentReport(prim_path=garment.prim_path, tier=tier,
+                         vertices=int(binding.rest_points.shape[0]), frames=num_t,
+                         mean_body_distance_mm=distance * 1000.0,
+                         bundle=None if learned is None else bundle.name,
+                         fit=None if learned is None else tuple(float(a) for a in learned.alpha),
+                         postprocess_moved=moved, max_displacement_mm=max_disp * 1000.0,
+                         max_offset_mm=max_off * 1000.0, warnings=tuple(warnings),
+                         fallback_coarse=sum(by is Tier.COARSE for _, by, _ in fallbacks),
+                         fallback_skinning=sum(by is Tier.SKINNING for _, by, _ in fallbacks))
+
+
+def _guarded(learned: LearnedGarment, tier: Tier, points: np.ndarray, skinned: np.ndarray, poses: np.ndarray,
+             transl: np.ndarray, edges: np.ndarray, limits: GuardLimits, batch_size: int
+             ) -> tuple[np.ndarray, dict[int, tuple[Tier, str]]]:
+    """A learned tier's frames, each one that is not a garment replaced by the next safer tier.
+
+    Args:
+        points: (T, N, 3) the ``tier`` output [m]; skinned: (T, N, 3) the skinned garment [m].
+        poses: (T, 72) [rad]; transl: (T, 3) [m]: the frames, to evaluate the coarse tier on.
+        edges: (E, 2) the garment's edges.
+    Returns:
+        ``(points (T, N, 3), {frame index: (tier used instead, why the frame was rejected)})``.
+    """
+    rest = learned.binding.rest_points
+    faults = check_frames(points, skinned, rest, edges, limits)
+    out = np.array(points, dtype=np.float64)
+    bad = np.flatnonzero(~faults.ok)
+    used: dict[int, tuple[Tier, str]] = {}
+    if bad.size and tier is Tier.DETAIL:
+        coarse = learned.evaluate(Tier.COARSE, poses[bad], transl[bad], batch_size=batch_size,
+                                  skinned=skinned[bad]).points
+        ok = check_frames(coarse, skinned[bad], rest, edges, limits).ok
+        out[bad[ok]] = coarse[ok]
+        used.update((int(i), (Tier.COARSE, faults.reasons[i])) for i in bad[ok])
+        bad = bad[~ok]
+    out[bad] = skinned[bad]
+    used.update((int(i), (Tier.SKINNING, faults.reasons[i])) for i in bad)
+    return out, used
