@@ -67,6 +67,8 @@ def _parser() -> argparse.ArgumentParser:
     g.add_argument("config", help="data set config (.json or .toml; see cloth_usd.datagen.factory)")
     g.add_argument("-o", "--output", required=True, help="folder for shards, manifest.json and fit.npz")
     g.add_argument("--workers", type=int, default=1, help="simulation processes (default 1)")
+    g.add_argument("--mocap", metavar="DIR", help="folder the config's BVH motions are relative to "
+                                                 "(default: the config's mocap_dir, else $CLOTH_USD_MOCAP)")
 
     bt = add_command("batch", help="bake many jobs (a job file, stage list or globs) in workers or on Ray")
     bt.add_argument("jobs", nargs="+", metavar="JOBS",
@@ -117,6 +119,8 @@ def _parser() -> argparse.ArgumentParser:
     tr.add_argument("--device", default="auto", help="auto (default: cuda when available), cpu or cuda")
     tr.add_argument("--epochs", type=int, help="total epochs (overrides the config; also when resuming)")
     tr.add_argument("--resume", action="store_true", help="continue the run in --out after its last epoch")
+    tr.add_argument("--mocap", metavar="DIR", help="physics: the folder the data config's BVH motions are relative "
+                                                  "to (default: the config's mocap_dir, else $CLOTH_USD_MOCAP)")
     tr.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
     tr.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
 
@@ -131,6 +135,8 @@ def _parser() -> argparse.ArgumentParser:
     ex.add_argument("--metrics", help="metrics.json of cloth-usd evaluate, recorded in the manifest")
     ex.add_argument("--description", default="", help="one line about the training data")
     ex.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
+    ex.add_argument("--mocap", metavar="DIR", help="physics runs: the folder the data config's BVH motions are "
+                                                  "relative to (default: $CLOTH_USD_MOCAP)")
     ex.add_argument("--force", action="store_true", help="write into a non-empty folder")
 
     ev = add_command("evaluate", help="per-vertex error of a bundle (and ablation runs) on the test splits")
@@ -184,7 +190,7 @@ def _render(args: argparse.Namespace) -> int:
 def _datagen(args: argparse.Namespace) -> int:
     from .datagen.factory import load_config, run_factory
 
-    manifest = run_factory(load_config(args.config), args.output, workers=args.workers)
+    manifest = run_factory(load_config(args.config, mocap_dir=args.mocap), args.output, workers=args.workers)
     sys.stdout.write(f"{len(manifest.accepted)} sequences simulated, {len(manifest.rejected)} rejected "
                      f"as unstable; manifest in {args.output}/manifest.json\n")
     return 0
@@ -299,7 +305,8 @@ def _train(args: argparse.Namespace) -> int:
     import dataclasses
 
     from .errors import ArgumentError
-    from .nn.train import load_train_config, resume_settings, train
+    from .nn.physics_train import PhysicsOptions, load_physics_config
+    from .nn.train import resume_settings, train
 
     if args.threads:
         import torch
@@ -309,12 +316,17 @@ def _train(args: argparse.Namespace) -> int:
     if args.resume and (config_path is None or coarse_run is None):
         config, prior_coarse = resume_settings(args.out, epochs=args.epochs)
         coarse_run = coarse_run or prior_coarse
+    options = PhysicsOptions()
     if config_path is not None or not args.resume:
-        config = load_train_config(config_path, epochs=args.epochs)
+        config, options = load_physics_config(config_path, epochs=args.epochs)  # TrainConfig keys + "physics"
     if args.objective:
         config = dataclasses.replace(config, objective=args.objective)
 
     physics = config.objective.value == "physics"
+    if not physics and options != PhysicsOptions():
+        raise ArgumentError(f"--config {config_path}: its \"physics\" table applies to --objective physics only")
+    if args.mocap and not physics:
+        raise ArgumentError("--mocap: only a physics run reads motions (a supervised run reads simulated data)")
     # physics: val is the energy [J] above the base garment's (skinned for coarse, M_coarse for detail)
     mm = ("mm from skinning" if args.tier == "coarse" else "mm from the coarse garment") if physics else "mm"
 
@@ -329,7 +341,8 @@ def _train(args: argparse.Namespace) -> int:
         if args.resume:
             raise ArgumentError("--objective physics: --resume is not supported yet; train into a new --out")
         result = train_physics(args.data, args.out, config, tier=args.tier, coarse_run=coarse_run,
-                               device=args.device, body=_body(args.body_model), progress=show)
+                               device=args.device, body=_body(args.body_model), progress=show, options=options,
+                               mocap_dir=args.mocap)
     else:
         result = train(args.tier, args.data, args.out, config, coarse_run=coarse_run, device=args.device,
                        resume=args.resume, body=_body(args.body_model), progress=show)
@@ -354,7 +367,7 @@ def _export(args: argparse.Namespace) -> int:
             raise ArgumentError(f"--metrics {args.metrics}: unreadable ({exc})") from exc
     out = export_bundle(args.coarse_run, args.detail_run, args.data, args.out, name=args.name,
                         category=args.category, metrics=metrics, description=args.description,
-                        force=args.force, body=_body(args.body_model))
+                        force=args.force, body=_body(args.body_model), mocap_dir=args.mocap)
     sys.stdout.write(f"wrote bundle {out} (ONNX checked against torch on the validation data)\n")
     return 0
 

@@ -207,7 +207,7 @@ def import_motion(
 def _bvh_motion(source: Path, joints: np.ndarray, fps: float, frames: tuple[int, int] | None, joint_map
                 ) -> tuple[np.ndarray, np.ndarray, str, tuple[int, int]]:
     """Poses (T, 72) [rad], root offsets (T, 3) [m], the rig's name and the frames used."""
-    from .datagen.bvh import BVH_RIGS, read_bvh, retarget_bvh, rig_mapping, trim_bvh
+    from .datagen.bvh import BVH_RIGS, read_bvh, retarget_bvh, rig_mapping, synthetic_first_frame, trim_bvh
 
     bvh = read_bvh(source)
     user = as_joint_map(joint_map)
@@ -221,22 +221,13 @@ def _bvh_motion(source: Path, joints: np.ndarray, fps: float, frames: tuple[int,
     if bvh.num_frames == 0:
         raise MotionFileError(f"{source}: the file has no frames")
     if frames is None:
-        frames = (1 if _synthetic_first_frame(bvh, rig) else 0, bvh.num_frames - 1)
+        frames = (1 if synthetic_first_frame(bvh, rig) else 0, bvh.num_frames - 1)
     elif frames[1] >= bvh.num_frames:
         raise ArgumentError(f"--frames {frames[0]}:{frames[1]}: {source} has frames 0:{bvh.num_frames - 1}")
     bvh = trim_bvh(bvh, *frames)
     poses, root = retarget_bvh(bvh, mapping=mapping, fps=fps, up_axis=None, blend_seconds=0.0,
                                smpl_joints=joints)
     return poses, root, name, frames
-
-
-def _synthetic_first_frame(bvh, rig: str | None) -> bool:
-    """True for a CMU conversion by cgspeed whose frame 0 is the T-pose it prepends to every
-    take (the root unturned, every joint near its rest), not captured motion."""
-    if rig not in ("cmu-mb", "cmu-daz") or bvh.num_frames < 2:
-        return False
-    root = [k for k, c in enumerate(bvh.channels[0]) if c.endswith("rotation")]
-    return bool(np.all(bvh.motion[0, root] == 0.0) and np.abs(bvh.motion[0, len(bvh.channels[0]):]).max() < 30.0)
 
 
 def _amass_shape(source: Path) -> tuple[np.ndarray | None, str | None]:

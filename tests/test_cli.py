@@ -282,3 +282,19 @@ def test_main_leaves_the_sigterm_handler_as_it_found_it():
     before = signal.getsignal(signal.SIGTERM)
     assert main(["bake", "nothing.usda", "-o", "x.usdc"]) == 2
     assert signal.getsignal(signal.SIGTERM) is before
+
+
+def test_train_refuses_physics_settings_for_a_supervised_run(tmp_path, capsys):
+    """The "physics" table of a --config and --mocap are physics-run settings: a supervised run
+    that is given them says so in one line instead of ignoring them."""
+    pytest.importorskip("torch")
+    config = tmp_path / "c.json"
+    config.write_text('{"objective": "supervised", "physics": {"dynamic": true}}')
+    assert main(["train", "coarse", "--data", str(tmp_path), "-o", str(tmp_path / "run"), "--config", str(config)]) == 2
+    assert "physics\" table applies to --objective physics only" in capsys.readouterr().err
+    assert main(["train", "coarse", "--data", str(tmp_path), "-o", str(tmp_path / "run"), "--mocap", str(tmp_path)]) == 2
+    assert "--mocap: only a physics run" in capsys.readouterr().err
+    config.write_text('{"objective": "physics", "physics": {"dynamc": true}}')
+    assert main(["train", "coarse", "--data", str(tmp_path), "-o", str(tmp_path / "run"), "--config", str(config)]) == 2
+    assert "dynamc" in capsys.readouterr().err
+    assert not (tmp_path / "run").exists()

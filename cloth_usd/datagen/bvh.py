@@ -50,6 +50,7 @@ __all__ = [
     "detect_up_axis",
     "load_bvh",
     "parse_bvh",
+    "synthetic_first_frame",
     "read_bvh",
     "retarget_bvh",
     "rig_mapping",
@@ -484,6 +485,15 @@ def trim_bvh(bvh: Bvh, start: int, stop: int) -> Bvh:
     if not 0 <= start <= stop < bvh.num_frames:
         raise ArgumentError(f"frames {start}:{stop} are outside {bvh.source}'s frames 0:{bvh.num_frames - 1}")
     return replace(bvh, motion=bvh.motion[start:stop + 1].copy())
+
+
+def synthetic_first_frame(bvh: Bvh, rig: str | None) -> bool:
+    """True for a CMU conversion by cgspeed whose frame 0 is the T-pose it prepends to every
+    take (the root unturned, every joint near its rest), not captured motion."""
+    if rig not in ("cmu-mb", "cmu-daz") or bvh.num_frames < 2:
+        return False
+    root = [k for k, c in enumerate(bvh.channels[0]) if c.endswith("rotation")]
+    return bool(np.all(bvh.motion[0, root] == 0.0) and np.abs(bvh.motion[0, len(bvh.channels[0]):]).max() < 30.0)
 
 
 def _resolve_mapping(bvh: Bvh, mapping: Mapping[str, str] | None) -> dict[int, int]:

@@ -13,6 +13,7 @@ import dataclasses
 import hashlib
 import json
 import logging
+import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,10 +27,16 @@ from ..core.fit import FitModel, common_anchors, fit_factor_analysis, pair_dista
 from ..errors import ArgumentError
 from .bodies import body_shapes
 from .dataset import MANIFEST_NAME, DatasetConfig, Job, Manifest, run_jobs
+from .floor import FLOOR_SPLIT, FloorSpec, floor_jobs
+from .mocap import MocapSpec, mocap_motion
+from .simulate import SimConfig
 from .motion import MotionKind, MotionSpec, generate
 from .tshirt import make_tshirt, tshirt_variants
 
-__all__ = ["FactoryConfig", "load_config", "plan_jobs", "drape_pairs", "run_factory"]
+__all__ = ["FactoryConfig", "MOCAP_ENV", "load_config", "plan_jobs", "drape_pairs", "run_factory"]
+
+#: The environment variable naming the mocap folder when neither the config nor ``--mocap`` does.
+MOCAP_ENV = "CLOTH_USD_MOCAP"
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +59,9 @@ class FactoryConfig:
     bodies: tuple[str, ...] = tuple(s.name for s in body_shapes())
     test_bodies: tuple[str, ...] = ("medium_thin", "medium_regular", "medium_fat")
     train_motions: tuple[dict, ...] = _DEFAULT_TRAIN_MOTIONS
-    """MotionSpec fields per motion."""
+    """Per motion, the fields of a procedural :class:`~cloth_usd.datagen.motion.MotionSpec`, or
+    of a :class:`~cloth_usd.datagen.mocap.MocapSpec` (an entry with a ``bvh`` key): a real clip,
+    eased in, whose warm-up frames training and evaluation leave out."""
     test_motions: tuple[dict, ...] = _DEFAULT_TEST_MOTIONS
     garment_vertices: int | None = None
     """Override every shirt's target vertex count (small data sets, tests)."""
@@ -64,10 +73,27 @@ class FactoryConfig:
     """Cut every motion to this many frames (tests)."""
     test_body_shirts: int | None = None
     """Training shirts worn by each test body (the first ones); None: all of them."""
+    simulate_splits: tuple[str, ...] | None = None
+    """Simulate only the sequences of these splits (a test set: ``["test_motion"]``); every
+    pair is still draped, so the fit attribute is fitted on the training pairs. None: all."""
+    floor: dict | None = None
+    """The per-frame error floor (a :class:`FloorSpec`'s fields): for some of the sequences
+    to be simulated, a few of their frames' poses held until the cloth settles, each its own
+    sequence of split ``floor`` (see :mod:`cloth_usd.datagen.floor`). None: none."""
+    mocap_dir: str | None = None
+    """The folder the ``bvh`` motions are relative to (a relative one: to the config file's
+    folder). Usually given at run time (``--mocap DIR`` or ``$CLOTH_USD_MOCAP``), since the
+    clips are not part of the project."""
 
 
-def load_config(path: str | Path) -> FactoryConfig:
-    """A FactoryConfig from ``.json`` or ``.toml``; unknown keys are an error naming them."""
+def load_config(path: str | Path, *, mocap_dir: str | Path | None = None) -> FactoryConfig:
+    """A FactoryConfig from ``.json`` or ``.toml``; unknown keys are an error naming them.
+
+    Args:
+        path: the config file.
+        mocap_dir: the mocap folder (overrides the config's ``mocap_dir``; when neither
+            names one, ``$CLOTH_USD_MOCAP``).
+    """
     path = Path(path)
     raw = read_config(path, "the data set config")
     if not isinstance(raw, dict):
@@ -76,18 +102,54 @@ def load_config(path: str | Path) -> FactoryConfig:
     unknown = sorted(set(raw) - known)
     if unknown:
         raise ArgumentError(f"{path}: unknown keys {unknown} (valid: {', '.join(sorted(known))})")
-    for key in ("test_shirts", "bodies", "test_bodies", "train_motions", "test_motions"):
+    for key in ("test_shirts", "bodies", "test_bodies", "train_motions", "test_motions", "simulate_splits"):
         if key in raw:
             raw[key] = tuple(raw[key])
+    if mocap_dir is not None:
+        raw["mocap_dir"] = str(mocap_dir)
+    elif raw.get("mocap_dir"):
+        raw["mocap_dir"] = str(path.parent / raw["mocap_dir"])
+    elif os.environ.get(MOCAP_ENV):
+        raw["mocap_dir"] = os.environ[MOCAP_ENV]
     return FactoryConfig(**raw)
 
 
-def _motion(fields: dict, max_frames: int | None) -> tuple[str, np.ndarray, np.ndarray]:
-    spec = MotionSpec(**fields)
-    poses, root = generate(spec)
-    if max_frames:
-        poses, root = poses[:max_frames], root[:max_frames]
-    return f"{MotionKind(spec.kind).value}-s{spec.seed}", poses, root
+@dataclass(frozen=True)
+class _Motion:
+    name: str
+    poses: np.ndarray
+    transl: np.ndarray
+    fps: float
+    warmup_frames: int = 0
+    source: dict | None = None
+
+
+def _motion(fields: dict, config: FactoryConfig, where: str, smpl_joints: np.ndarray) -> _Motion:
+    if not isinstance(fields, dict):
+        raise ArgumentError(f"{where}: expected a table of motion fields, got {fields!r}")
+    if "bvh" in fields:
+        try:
+            spec = MocapSpec(**fields)
+        except TypeError as exc:
+            raise ArgumentError(f"{where}: {exc} (MocapSpec fields: bvh, start_seconds, seconds, fps, "
+                                "ease_seconds, ramp_seconds, name)") from None
+        if not config.mocap_dir:
+            raise ArgumentError(f"{where} names the clip {spec.bvh!r} but no mocap folder is given: pass --mocap DIR "
+                                f"(or set ${MOCAP_ENV})")
+        m = mocap_motion(spec, config.mocap_dir, smpl_joints=smpl_joints)
+        poses, transl, warmup = m.poses, m.transl, m.warmup_frames
+        name, source, fps = spec.label, m.source, spec.fps
+    else:
+        try:
+            spec = MotionSpec(**fields)
+        except TypeError as exc:
+            raise ArgumentError(f"{where}: {exc}") from None
+        poses, transl = generate(spec)
+        name, source, fps, warmup = f"{MotionKind(spec.kind).value}-s{spec.seed}", None, spec.fps, 0
+    if config.max_frames:
+        poses, transl = poses[:config.max_frames], transl[:config.max_frames]
+        warmup = min(warmup, max(config.max_frames - 1, 0))
+    return _Motion(name=name, poses=poses, transl=transl, fps=float(fps), warmup_frames=int(warmup), source=source)
 
 
 def _body_label(betas: np.ndarray) -> str:
@@ -109,13 +171,24 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     bad = [i for i in config.test_shirts if not 0 <= i < len(variants)]
     if bad:
         raise ArgumentError(f"test_shirts {bad}: out of range for {len(variants)} shirts")
+    splits = ("train", "val", "test_body", "test_garment", "test_motion")
+    bad = sorted(set(config.simulate_splits or ()) - set(splits))
+    if bad:
+        raise ArgumentError(f"simulate_splits {bad}: unknown (valid: {', '.join(splits)})")
     shapes = {s.name: s for s in body_shapes(list(config.bodies))}
     body_shapes(list(config.test_bodies))  # validates the names
     train_shirts = [i for i in range(len(variants)) if i not in config.test_shirts]
     train_bodies = [n for n in config.bodies if n not in config.test_bodies]
-    train_m = [_motion(m, config.max_frames) for m in config.train_motions]
-    test_m = [_motion(m, config.max_frames) for m in config.test_motions]
-    plan: list[tuple[str, int, str, tuple]] = []
+    mean_joints = shape_body(body, np.zeros(1))[1]
+    train_m = [_motion(m, config, f"train_motions[{i}]", mean_joints) for i, m in enumerate(config.train_motions)]
+    test_m = [_motion(m, config, f"test_motions[{i}]", mean_joints) for i, m in enumerate(config.test_motions)]
+    sim_fps = float(config.sim.get("fps", SimConfig.fps))
+    for kind, motions in (("train_motions", train_m), ("test_motions", test_m)):
+        for i, m in enumerate(motions):
+            if abs(m.fps - sim_fps) > 1e-6 * sim_fps:
+                raise ArgumentError(f"{kind}[{i}] ({m.name}) runs at {m.fps:g} fps but the simulation at {sim_fps:g} "
+                                    "(sim.fps): give them the same rate")
+    plan: list[tuple[str, int, str, _Motion]] = []
     plan += [("train", s, b, m) for s in train_shirts for b in train_bodies for m in train_m]
     plan += [("test_body", s, b, m) for s in train_shirts[:config.test_body_shirts] for b in config.test_bodies
              for m in test_m[:1]]
@@ -126,24 +199,29 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
         if config.test_shirts and config.test_bodies else []
     garments: dict[tuple[int, str], tuple[np.ndarray, np.ndarray]] = {}
     jobs = []
-    for split, s, b, (motion_name, poses, root) in plan:
+    for split, s, b, motion in plan:
         if (s, b) not in garments:
             garments[(s, b)] = make_tshirt(body, shapes[b].betas, variants[s])
         verts, faces = garments[(s, b)]
-        _, joints = shape_body(body, shapes[b].betas)
+        meta = {"split": split, "shirt": s, "shirt_params": dataclasses.asdict(variants[s]),
+                "shirt_label": _shirt_label(variants[s]), "body": b,
+                "body_label": _body_label(shapes[b].betas), "motion": motion.name, "fps": motion.fps}
+        if motion.warmup_frames:
+            meta["warmup_frames"] = motion.warmup_frames
+        if motion.source is not None:
+            meta["motion_source"] = motion.source
         jobs.append(Job(
-            name=f"{split}.shirt{s}.{b}.{motion_name}", garment_vertices=verts, garment_faces=faces,
-            betas=shapes[b].betas, poses=poses, transl=root, seed=config.seed,
-            meta={"split": split, "shirt": s, "shirt_params": dataclasses.asdict(variants[s]),
-                  "shirt_label": _shirt_label(variants[s]), "body": b,
-                  "body_label": _body_label(shapes[b].betas), "motion": motion_name}))
+            name=f"{split}.shirt{s}.{b}.{motion.name}", garment_vertices=verts, garment_faces=faces,
+            betas=shapes[b].betas, poses=motion.poses, transl=motion.transl, seed=config.seed, meta=meta))
+    if config.floor is not None:
+        spec = FloorSpec.from_mapping(config.floor)
+        simulated = [j for j in jobs if config.simulate_splits is None or j.meta["split"] in config.simulate_splits]
+        jobs += floor_jobs(simulated, spec)
     return jobs
 
 
 def _worker(args: tuple) -> None:
     jobs, out_dir, sim, dataset, name = args
-    from .simulate import SimConfig
-
     run_jobs(jobs, out_dir, SimConfig(**sim), dataset=DatasetConfig(**dataset), manifest_name=name)
 
 
@@ -179,8 +257,6 @@ def _pair(job: Job) -> str:
 def _drape_path(out_dir, key: str, verts, faces, betas, sim: dict) -> Path:
     """The cached drape of a pair: named by a digest of its inputs, so a changed garment or
     solver setting drapes again."""
-    from .simulate import SimConfig
-
     h = hashlib.sha256(json.dumps(SimConfig(**sim).to_json(), sort_keys=True).encode())
     for a in (verts, faces, betas):
         h.update(np.ascontiguousarray(a).tobytes())
@@ -190,7 +266,7 @@ def _drape_path(out_dir, key: str, verts, faces, betas, sim: dict) -> Path:
 def _drape_worker(args: tuple) -> tuple[str, str]:
     """Drape one garment-body pair into ``out/drape/<pair>.npz`` (atomic); returns (pair, failure)."""
     key, verts, faces, betas, out_dir, sim = args
-    from .simulate import SimConfig, SimulationError, drape
+    from .simulate import SimulationError, drape
 
     path = _drape_path(out_dir, key, verts, faces, betas, sim)
     if path.exists():
@@ -237,9 +313,11 @@ def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1)
     planned = plan_jobs(config, body)
     log.info("%d sequences planned", len(planned))
     jobs, drape_failed = drape_pairs(planned, out, config.sim, workers=workers)
-    workers = max(1, min(workers, len(jobs)))
+    wanted = [j for j in jobs if config.simulate_splits is None
+              or j.meta["split"] in (*config.simulate_splits, FLOOR_SPLIT)]
+    workers = max(1, min(workers, len(wanted)))
     names = [f"manifest.worker-{k}.json" for k in range(workers)]
-    parts = [(jobs[k::workers], out, config.sim, config.dataset, names[k]) for k in range(workers)]
+    parts = [(wanted[k::workers], out, config.sim, config.dataset, names[k]) for k in range(workers)]
     if workers == 1:
         _worker(parts[0])
     else:
@@ -259,6 +337,8 @@ def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1)
     if merged is None:
         merged = Manifest(config={}, dataset={}, engine={})
     for job in planned:
+        if config.simulate_splits is not None and job.meta["split"] not in (*config.simulate_splits, FLOOR_SPLIT):
+            continue
         if _pair(job) in drape_failed:
             merged.sequences[job.name] = {"status": "rejected", "shard": None, "seed": int(job.seed),
                                           "digest": None, "meta": job.meta,

@@ -43,7 +43,8 @@ from ..core.pipeline import (
 from ..errors import ArgumentError
 
 __all__ = ["Split", "TEST_SPLITS", "Clip", "DataSet", "load_dataset", "CoarseTarget", "with_coarse_target", "with_heading",
-           "plan_batches", "CoarseExample", "DetailExample", "coarse_example", "detail_example", "Moments", "Statistics", "even_frames"]
+           "plan_batches", "CoarseExample", "DetailExample", "coarse_example", "detail_example", "Moments", "Statistics", "even_frames",
+           "warmup_frames"]
 
 log = logging.getLogger(__name__)
 
@@ -129,13 +130,14 @@ def _pair_key(rest: np.ndarray, faces: np.ndarray, betas: np.ndarray) -> str:
 
 def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, *,
                  body: BodyModel | None = None, max_frames: int | None = None) -> DataSet:
-    """Load the accepted shards of some splits of a factory folder.
+    """Load the accepted shards of some splits of a factory folder, each without its warm-up
+    frames (:func:`warmup_frames`).
 
     Args:
         root: the folder ``cloth-usd datagen`` wrote (``manifest.json``, ``fit.npz``, shards).
         splits: the splits to load (all when None).
         body: the body model the data was simulated with (default: the embedded one).
-        max_frames: keep only the first frames of every sequence (quick runs).
+        max_frames: keep only the first frames of every sequence after its warm-up (quick runs).
     Raises:
         ArgumentError: naming the folder, when it is not a data set or a shard is unreadable.
     """
@@ -157,6 +159,8 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
     for name in manifest.accepted:
         entry = manifest.sequences[name]
         split_name = entry.get("split") or entry.get("meta", {}).get("split")
+        if entry.get("meta", {}).get("floor_of"):
+            continue  # a held pose of another sequence (cloth_usd.datagen.floor), never trained or evaluated on
         try:
             split = Split(split_name)
         except ValueError:
@@ -172,13 +176,24 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
         key = _pair_key(rest, shard.garment_faces, shard.betas)
         if key not in pairs:
             pairs[key] = prepare_pair(body, shard.betas, rest, shard.garment_faces, fit)
-        t = shard.positions.shape[0] if max_frames is None else min(max_frames, shard.positions.shape[0])
-        clips.append(Clip(name=name, split=split, meta=dict(entry.get("meta", {})), pair=pairs[key],
-                          rest_points=rest, positions=shard.positions[:t], coarse=shard.coarse[:t],
-                          poses=shard.poses[:t], transl=shard.transl[:t]))
+        meta = dict(entry.get("meta", {}))
+        w = warmup_frames(meta)  # the ease-in of a real clip: the garment still catching up
+        t = shard.positions.shape[0] if max_frames is None else min(w + max_frames, shard.positions.shape[0])
+        if w >= t:
+            log.warning("%s: sequence %s has no frames after its %d warm-up frames, skipped", root, name, w)
+            continue
+        clips.append(Clip(name=name, split=split, meta=meta, pair=pairs[key],
+                          rest_points=rest, positions=shard.positions[w:t], coarse=shard.coarse[w:t],
+                          poses=shard.poses[w:t], transl=shard.transl[w:t]))
     log.info("%s: %d sequences, %d garment-body pairs", root, len(clips), len(pairs))
     return DataSet(root=root, manifest_sha256=file_sha256(root / MANIFEST), fit=fit, body=body,
                    clips=tuple(clips))
+
+
+def warmup_frames(meta: dict) -> int:
+    """The first frames of a sequence that training and evaluation leave out (its job
+    ``meta``'s ``warmup_frames``: the ease-in of a real clip; 0 for procedural motions)."""
+    return max(0, int(meta.get("warmup_frames", 0)))
 
 
 class CoarseTarget(str, enum.Enum):

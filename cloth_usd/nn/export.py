@@ -128,7 +128,8 @@ def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | N
 def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_dir: str | Path,
                   out_dir: str | Path, *, name: str, category: str = "tshirt",
                   metrics: dict | None = None, description: str = "", parity_frames: int = 4,
-                  tolerance: float = 1e-4, force: bool = False, body=None) -> Path:
+                  tolerance: float = 1e-4, force: bool = False, body=None,
+                  mocap_dir: str | Path | None = None) -> Path:
     """Export trained runs to ONNX and write a verified model bundle.
 
     The best-validation model of each run is exported (:func:`export_coarse`,
@@ -146,6 +147,7 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         name, category: the bundle's name and garment category.
         metrics: evaluation metrics (``cloth-usd evaluate``'s ``metrics.json``) to record.
         description: one line about the training data.
+        mocap_dir: for a physics run whose config names BVH motions, their folder.
     Returns:
         The bundle folder, loaded once through :func:`cloth_usd.runtime.load_bundle`.
     Raises:
@@ -183,7 +185,7 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
                                 "a bundle's two runs share their data")
         body = body if body is not None else load_body_model()
         data = physics_set(data_dir, body, heading=coarse.config.heading, splits=(Split.VAL,),
-                           max_frames=parity_frames)
+                           max_frames=parity_frames, mocap_dir=mocap_dir)
         data_sha256, fit_npz = data.config_sha256, coarse.path / PHYSICS_FIT
     else:
         data = load_dataset(data_dir, (Split.VAL,), body=body, max_frames=parity_frames)

@@ -20,6 +20,20 @@ coarse model's garment ``M_coarse``, which it sees as the runtime makes it. The 
 losses are energies [J]; validation is relative to the base garment's (the skinned one for
 the coarse tier, ``M_coarse`` for the detail tier; below 0: the model found a state of
 lower energy). Shape letters: B frames, N garment vertices.
+
+The dynamic variant (:class:`PhysicsOptions` ``dynamic``, the ``"physics"`` table of the
+run's ``--config`` file, :func:`load_physics_config`) trains on windows of three
+consecutive frames ``t-2, t-1, t`` of one clip: the model is evaluated on all three and the
+energy at ``t`` adds implicit Euler's inertia ``inertia_energy(x_t, x_{t-1}, x_{t-2},
+dt=1/fps)`` (and, optionally, the lagged friction against the body), SNUG's and HOOD's
+objective for a per-frame model. The history is detached by default: then a minimum of the
+loss satisfies the implicit Euler step ``m (x_t - 2 x_{t-1} + x_{t-2}) / h^2 = -grad E(x_t)``
+at every frame, the equation of motion. Backpropagated through, a minimum also answers for
+each frame's part in the next two frames' inertia: the summed squared accelerations of the
+clip are smoothed, which is not the equation of motion. (Measured on the README's probe,
+the inertia there is 1e-5 of the energy and the two gradients differ by 2e-5 of their norm.)
+The clip's frame rate is its motion's (``MotionSpec.fps``); frames before ``t = 2`` and a
+clip's warm-up are never ``t``.
 """
 
 from __future__ import annotations
@@ -43,18 +57,21 @@ from ..core.pipeline import (CoarseBase, GarmentPair, coarse_base_points, coarse
                              pose_body, prepare_pair)
 from ..core.scene import Tier
 from ..errors import ArgumentError, ClothUsdError
-from .data import Moments, Split, plan_batches
-from .physics import GarmentRest, Material, garment_energy, garment_rest
+from .data import Moments, Split, even_frames, plan_batches
+from .physics import GarmentRest, Material, contact_normal_force, friction_energy, garment_energy, garment_rest
 from .train import (CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, TrainConfig, TrainResult, _atomic_text,
                     _coarse_forward, _detail_forward, _record_epoch, _start_epoch, _step, _Tensors, build_model,
                     plot_history)
 
-__all__ = ["PhysicsClip", "PhysicsSet", "physics_set", "train_physics", "PHYSICS_FIT", "OUTPUT_SCALE"]
+__all__ = ["PhysicsClip", "PhysicsSet", "PhysicsOptions", "physics_set", "load_physics_config", "window_batches",
+           "train_physics", "PHYSICS_FIT", "VAL_TERMS", "OUTPUT_SCALE", "TERMS"]
 
 log = logging.getLogger(__name__)
 
 #: The fit model of a physics run's pairs, in its run folder.
 PHYSICS_FIT = "fit.npz"
+#: Per epoch, the validation energy terms of the model's garment and of its base [J a frame].
+VAL_TERMS = "val_terms.csv"
 #: The coarse model's output scale [m] per axis under the physics objective (no target
 #: to measure it on): the order of a T-shirt's departure from skinning.
 OUTPUT_SCALE = 0.02
@@ -65,6 +82,79 @@ START_SHRINK = 0.05
 #: negative one left every vertex at zero magnitude and zero gradient (a detail run, seed 0,
 #: stayed exactly at M_coarse for 3 epochs).
 START_MAGNITUDE = 0.05
+#: The energy terms of the objective, in order (``total`` is their sum).
+TERMS = ("membrane", "bending", "gravity", "contact", "inertia", "friction")
+#: A dynamic window: the frames ``t - 2, t - 1, t`` as offsets from ``t``.
+WINDOW = (-2, -1, 0)
+
+
+@dataclass(frozen=True)
+class PhysicsOptions:
+    """The physics objective's own settings: the ``"physics"`` table of a physics run's
+    ``--config`` file (:func:`load_physics_config`), recorded in run.json."""
+
+    dynamic: bool = False
+    """Train on windows of frames ``t-2, t-1, t`` of one clip, the energy at ``t`` with
+    implicit Euler's inertia over the window (``dt`` = 1 / the clip's fps); False: the
+    quasi-static energy per frame. A batch is ``batch`` windows (three frames each)."""
+    detach_history: bool = True
+    """Dynamic only: ``x_{t-1}`` and ``x_{t-2}`` enter the inertia (and friction) as
+    constants, so a minimum is an implicit Euler step at every frame; False backpropagates
+    into them too (the clip's squared accelerations smoothed, not the equation of motion)."""
+    friction: bool = False
+    """Dynamic only: add the lagged smooth Coulomb friction against the body over the step
+    ``t-1 -> t`` (:func:`~cloth_usd.nn.physics.friction_energy`, the normal force held at
+    ``x_t``'s contact force)."""
+    friction_epsilon: float = 1.0e-2
+    """Slip speed [m/s] below which friction is smoothed (Newton's ``friction_epsilon``)."""
+
+    def __post_init__(self) -> None:
+        for name in ("dynamic", "detach_history", "friction"):
+            if not isinstance(getattr(self, name), bool):
+                raise ArgumentError(f"PhysicsOptions.{name} must be true or false, got {getattr(self, name)!r}")
+        if not (isinstance(self.friction_epsilon, (int, float)) and self.friction_epsilon > 0):
+            raise ArgumentError(f"PhysicsOptions.friction_epsilon must be > 0 [m/s], got {self.friction_epsilon!r}")
+        if self.friction and not self.dynamic:
+            raise ArgumentError("PhysicsOptions.friction needs dynamic: true (friction acts over a time step)")
+
+    @property
+    def window(self) -> tuple[int, ...]:
+        """Frame offsets from ``t`` of one example: (-2, -1, 0) dynamic, (0,) quasi-static."""
+        return WINDOW if self.dynamic else (0,)
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_mapping(cls, raw, source: str = "physics") -> PhysicsOptions:
+        """Build from a mapping; unknown keys are an error that names them and the valid ones."""
+        if not isinstance(raw, dict):
+            raise ArgumentError(f"{source}: expected a table of PhysicsOptions keys, got {type(raw).__name__}")
+        known = [f.name for f in dataclasses.fields(cls)]
+        unknown = sorted(set(raw) - set(known))
+        if unknown:
+            raise ArgumentError(f"{source}: unknown keys {unknown} (valid: {', '.join(known)})")
+        return cls(**raw)
+
+
+def load_physics_config(path: str | Path | None, **overrides) -> tuple[TrainConfig, PhysicsOptions]:
+    """A physics run's ``--config`` file: TrainConfig keys plus an optional ``"physics"`` table
+    of :class:`PhysicsOptions` keys. ``overrides`` (None values ignored) set TrainConfig keys.
+
+    Raises:
+        ArgumentError: an unreadable file, unknown keys, or values out of range.
+    """
+    from ..core.files import read_config
+
+    raw: dict = {}
+    if path is not None:
+        raw = read_config(Path(path), "the --config training config")
+        if not isinstance(raw, dict):
+            raise ArgumentError(f"--config {path}: expected a table of TrainConfig keys")
+    raw = dict(raw)
+    options = PhysicsOptions.from_mapping(raw.pop("physics", {}), f"--config {path}: physics")
+    train_raw = {**raw, **{k: v for k, v in overrides.items() if v is not None}}
+    return TrainConfig.from_mapping(train_raw, str(path) if path is not None else "config"), options
 
 
 @dataclass(frozen=True, eq=False)
@@ -84,11 +174,19 @@ class PhysicsClip:
     transl: np.ndarray
     """(T, 3) float64 root translation [m]."""
     meta: dict
+    fps: float = 24.0
+    """Frame rate of the motion [1/s] (its ``MotionSpec.fps``); the dynamic objective's
+    time step is ``1 / fps``."""
 
     @property
     def num_frames(self) -> int:
         """T."""
         return int(self.poses.shape[0])
+
+    @property
+    def dt(self) -> float:
+        """Time between frames [s]."""
+        return 1.0 / self.fps
 
 
 @dataclass(frozen=True)
@@ -108,7 +206,7 @@ class PhysicsSet:
 
 def physics_set(config_path: str | Path, body: BodyModel | None = None, *, heading: Heading | str = Heading.CANONICAL,
                 splits: Sequence[Split | str] | None = None, max_frames: int | None = None,
-                bending_scale: float = 1.0) -> PhysicsSet:
+                bending_scale: float = 1.0, mocap_dir: str | Path | None = None) -> PhysicsSet:
     """Plan a data set config's sequences (no simulation) for the physics objective.
 
     Args:
@@ -118,6 +216,8 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
         splits: the splits to keep (all when None).
         max_frames: cut every sequence to its first frames.
         bending_scale: multiplies the material's bending stiffness.
+        mocap_dir: the folder the config's BVH motions are relative to (see
+            :func:`~cloth_usd.datagen.factory.load_config`).
     """
     from ..core.files import file_sha256
     from ..datagen.factory import fit_training_pairs, load_config, plan_jobs
@@ -125,11 +225,13 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
 
     config_path = Path(config_path)
     body = body if body is not None else load_body_model()
-    factory = load_config(config_path)
+    factory = load_config(config_path, mocap_dir=mocap_dir)
     jobs = plan_jobs(factory, body)
     fit, _ = fit_training_pairs(jobs, body)
     base = Material.from_sim_config(SimConfig(**factory.sim))
     material = dataclasses.replace(base, bend_stiffness=base.bend_stiffness * bending_scale)
+    rates = _motion_rates(factory, config_path)
+    sim_fps = float(SimConfig(**factory.sim).fps)
     keep = None if splits is None else {Split(s) for s in splits}
     pairs: dict[str, tuple[GarmentPair, GarmentRest]] = {}
     clips = []
@@ -148,8 +250,33 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
         clips.append(PhysicsClip(name=job.name, split=split, pair=pair, rest=rest,
                                  rest_points=np.asarray(job.garment_vertices, dtype=np.float64),
                                  poses=np.asarray(poses, dtype=np.float64),
-                                 transl=np.asarray(transl, dtype=np.float64), meta=dict(job.meta)))
+                                 transl=np.asarray(transl, dtype=np.float64), meta=dict(job.meta),
+                                 fps=float(job.meta.get("fps") or rates.get(job.meta["motion"], sim_fps))))
     return PhysicsSet(config_sha256=file_sha256(config_path), fit=fit, material=material, clips=tuple(clips))
+
+
+def _motion_rates(factory, config_path: Path) -> dict[str, float]:
+    """The frame rate [1/s] of each procedural motion of a data set config, by the name the
+    factory gives its jobs (``<kind>-s<seed>``). A job's own ``meta["fps"]`` wins where the
+    factory records one; a motion named here by neither (a mocap clip) runs at the
+    simulator's rate, which the factory makes every motion match."""
+    from ..datagen.motion import MotionKind, MotionSpec
+    from ..datagen.simulate import SimConfig
+
+    sim_fps = float(SimConfig(**factory.sim).fps)
+    rates: dict[str, float] = {}
+    for fields in (*factory.train_motions, *factory.test_motions):
+        if not isinstance(fields, dict) or "bvh" in fields:
+            continue
+        spec = MotionSpec(**fields)
+        name, fps = f"{MotionKind(spec.kind).value}-s{spec.seed}", float(spec.fps)
+        if rates.setdefault(name, fps) != fps:
+            raise ArgumentError(f"{config_path}: motion {name} is listed at {rates[name]:g} and {fps:g} fps; "
+                                "the physics objective needs one rate per motion")
+        if fps != sim_fps:
+            log.warning("%s: motion %s is made at %g fps, the simulator samples at %g; the physics objective "
+                        "uses the motion's", config_path, name, fps, sim_fps)
+    return rates
 
 
 @dataclass(frozen=True)
@@ -225,32 +352,149 @@ def _statistics(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainC
             head[-1].bias.mul_(START_SHRINK)
 
 
-def _validate(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainConfig,
-              material: Material) -> tuple[float, float]:
-    """(mean energy relative to the base garment's [J], mean distance from it [mm]); the base is
-    the skinned garment (coarse tier) or the coarse model's (detail tier)."""
+def window_batches(clips: Sequence[PhysicsClip], batch: int, rng: np.random.Generator | None = None, *,
+                   frames: int | None = None, window: Sequence[int] = WINDOW) -> list[tuple[int, np.ndarray]]:
+    """Batches of examples, each a window of frames ``t + window`` of one clip (a batch shares
+    one garment graph), as :func:`~cloth_usd.nn.data.plan_batches` plans frames.
+
+    Every ``t`` whose window lies inside the clip and after its warm-up (``meta["warmup_frames"]``,
+    the frames a mocap clip eases in over) is an example: ``t >= 2`` for the dynamic window
+    (-2, -1, 0); a clip too short for one window gives none.
+
+    Args:
+        clips: the clips.
+        batch: windows per batch (B).
+        rng: shuffles the windows of every clip and the batch order; None keeps both in order.
+        frames: use only this many evenly spread windows per clip (all when None).
+        window: frame offsets from ``t``, all <= 0 (:attr:`PhysicsOptions.window`).
+    Returns:
+        ``[(clip index, t (B',) int64), ...]``, B' <= B.
+    """
+    if batch < 1:
+        raise ArgumentError(f"batch must be >= 1 window, got {batch}")
+    if not window or max(window) != 0:
+        raise ArgumentError(f"window: offsets from t ending at 0, got {tuple(window)}")
+    first_offset = -min(window)
+    out = []
+    for k, clip in enumerate(clips):
+        first = max(first_offset, int(clip.meta.get("warmup_frames", 0)))
+        if clip.num_frames <= first:
+            continue
+        t = first + even_frames(clip.num_frames - first, frames)
+        if rng is not None:
+            t = rng.permutation(t)
+        out += [(k, t[lo:lo + batch]) for lo in range(0, t.shape[0], batch)]
+    if rng is not None:
+        out = [out[i] for i in rng.permutation(len(out))]
+    return out
+
+
+@dataclass(frozen=True)
+class _Window:
+    """A batch of windows: the inputs of their distinct frames and where each window's are."""
+
+    inputs: _Inputs
+    """Of the U distinct frames of the batch, ascending."""
+    index: np.ndarray
+    """(W, B) int64 rows of ``inputs``: frame ``t_b + window[w]`` (the last row: t)."""
+
+
+def _window(step: _Tier, clip: PhysicsClip, t: np.ndarray, options: PhysicsOptions) -> _Window:
+    frames = np.asarray(t, dtype=np.int64)[None, :] + np.asarray(options.window, dtype=np.int64)[:, None]
+    distinct, index = np.unique(frames, return_inverse=True)  # overlapping windows share their frames
+    return _Window(step.inputs(clip, distinct), index.reshape(frames.shape))
+
+
+def _terms(clip: PhysicsClip, x: torch.Tensor, win: _Window, material: Material,
+           options: PhysicsOptions) -> dict[str, torch.Tensor]:
+    """The objective's terms at each window's frame t, each (B,) [J], and their ``total``.
+
+    Args:
+        x: (U, N, 3) float64 garments [m] at the window's distinct frames.
+    """
+    index = torch.from_numpy(win.index).to(x.device)
+    points = torch.from_numpy(win.inputs.body_points).to(x)
+    normals = torch.from_numpy(win.inputs.body_normals).to(x)
+    now = index[-1]
+    x_t, p_t, n_t = x[now], points[now], normals[now]
+    previous = None
+    if options.dynamic:
+        previous = (x[index[1]], x[index[0]])
+        if options.detach_history:
+            previous = (previous[0].detach(), previous[1].detach())
+    terms = garment_energy(x_t, clip.rest, material, body_points=p_t, body_normals=n_t, previous=previous,
+                           dt=clip.dt if previous is not None else None).as_dict()
+    terms.pop("total")
+    terms["friction"] = x_t.new_zeros(x_t.shape[0])
+    if options.friction:
+        force = contact_normal_force(x_t, p_t, n_t, material)  # lagged: a constant of this step
+        terms["friction"] = friction_energy(x_t, previous[0], p_t, points[index[1]], n_t, force, material,
+                                            dt=clip.dt, epsilon=options.friction_epsilon)
+    terms["total"] = sum(terms[name] for name in TERMS)
+    return terms
+
+
+@dataclass(frozen=True)
+class _Validation:
+    """Validation means per window (frame t) [J], and the distance from the base [mm]."""
+
+    model: dict[str, float]
+    base: dict[str, float]
+    mm: float
+
+    @property
+    def relative(self) -> float:
+        """The model's total energy above its base's [J] (below 0: lower)."""
+        return self.model["total"] - self.base["total"]
+
+
+def _validate(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainConfig, material: Material,
+              options: PhysicsOptions = PhysicsOptions()) -> _Validation:
+    """The objective on the validation windows, for the model's garment and its base (the
+    skinned garment for the coarse tier, the coarse model's for the detail tier; dynamic: each
+    with its own history), and the mean distance between them at frame t."""
+    names = (*TERMS, "total")
     if not clips:
-        return math.nan, math.nan
+        nan = {name: math.nan for name in names}
+        return _Validation(nan, dict(nan), math.nan)
     model.eval()
-    rel = dist = 0.0
+    sums = {"model": dict.fromkeys(names, 0.0), "base": dict.fromkeys(names, 0.0)}
+    dist = 0.0
     count = vertices = 0
     with torch.no_grad():
-        for k, frames in plan_batches(clips, config.batch, frames=config.val_frames or None):
+        for k, t in window_batches(clips, config.batch, frames=config.val_frames or None, window=options.window):
             clip = clips[k]
-            inp = step.inputs(clip, frames)
-            x = step.forward(model, clip, inp).cpu()
-            base = torch.from_numpy(inp.base)
-            rel += float((_energy(clip, x, inp, material) - _energy(clip, base, inp, material)).sum())
-            dist += float(torch.linalg.vector_norm(x - base, dim=-1).sum())
-            count += len(frames)
-            vertices += x.shape[0] * x.shape[1]
-    return rel / count, dist / vertices * 1000.0
+            win = _window(step, clip, t, options)
+            x = step.forward(model, clip, win.inputs).cpu()
+            base = torch.from_numpy(win.inputs.base)
+            for who, garment in (("model", x), ("base", base)):
+                for name, value in _terms(clip, garment, win, material, options).items():
+                    sums[who][name] += float(value.sum())
+            now = torch.from_numpy(win.index[-1])
+            dist += float(torch.linalg.vector_norm(x[now] - base[now], dim=-1).sum())
+            count += len(t)
+            vertices += len(t) * x.shape[1]
+    if not count:
+        raise ArgumentError(f"no validation window: every validation clip is shorter than {len(options.window)} "
+                            "frames (after its warm-up)")
+    mean = {who: {name: v / count for name, v in terms.items()} for who, terms in sums.items()}
+    return _Validation(mean["model"], mean["base"], dist / vertices * 1000.0)
+
+
+def _write_val_terms(path: Path, rows: list[tuple[int, _Validation]]) -> None:
+    names = (*TERMS, "total")
+    lines = [",".join(["epoch", *(f"{who}_{n}" for who in ("model", "base") for n in names), "mm"])]
+    for epoch, v in rows:
+        lines.append(",".join([str(epoch), *(f"{getattr(v, who)[n]:.9g}" for who in ("model", "base") for n in names),
+                               f"{v.mm:.6g}"]))
+    _atomic_text("\n".join(lines) + "\n", path)
 
 
 def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainConfig = TrainConfig(
         objective=Objective.PHYSICS, coarse_base=CoarseBase.SKINNED), *, tier: Tier | str = Tier.COARSE,
         coarse_run: str | Path | None = None, device: str | None = "auto", body: BodyModel | None = None,
-        progress: Callable[[EpochRecord], None] | None = None) -> TrainResult:
+        progress: Callable[[EpochRecord], None] | None = None,
+        options: PhysicsOptions = PhysicsOptions(), mocap_dir: str | Path | None = None) -> TrainResult:
     """Train a generator on the physics objective (see the module docstring).
 
     Args:
@@ -263,6 +507,11 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
         coarse_run: the trained coarse run folder (detail only).
         device: torch device (auto: CUDA when available).
         progress: called after every epoch.
+        options: the objective (quasi-static or dynamic, friction; :class:`PhysicsOptions`),
+            recorded in run.json under ``physics.options``. Dynamic: ``config.batch`` counts
+            windows of three frames, and the validation energy (and ``val_terms.csv``)
+            includes each garment's inertia over its own history.
+        mocap_dir: the folder the config's BVH motions are relative to.
     Raises:
         ArgumentError: a run exists in ``run_dir``, the config has no training pairs, or
             the tier and ``coarse_run`` do not go together.
@@ -286,10 +535,14 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
     heading = coarse.config.heading if coarse is not None else config.heading
     base = coarse.config.coarse_base if coarse is not None else config.coarse_base
     data = physics_set(config_path, body, heading=heading, splits=(Split.TRAIN, Split.VAL),
-                       max_frames=config.max_frames or None, bending_scale=config.bending_scale)
+                       max_frames=config.max_frames or None, bending_scale=config.bending_scale,
+                       mocap_dir=mocap_dir)
     train_clips, val_clips = data.split(Split.TRAIN), data.split(Split.VAL)
     if not train_clips:
         raise ArgumentError(f"{config_path}: no training sequences")
+    if not window_batches(train_clips, 1, window=options.window):
+        raise ArgumentError(f"{config_path}: no training sequence has {len(options.window)} frames for the "
+                            "dynamic objective's window (raise max_frames)")
     tensors = _Tensors(dev)
     step = _Tier(tier, body, base, tensors, coarse.model if coarse is not None else None)
     torch.manual_seed(config.seed)
@@ -302,31 +555,39 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
             "model_config": dataclasses.asdict(model.config),
             "data": {"path": str(Path(config_path).resolve()), "manifest_sha256": data.config_sha256,
                      "train_sequences": len(train_clips), "val_sequences": len(val_clips), "kind": "physics"},
-            "physics": {"material": dataclasses.asdict(data.material), "fit": PHYSICS_FIT},
+            "physics": {"material": dataclasses.asdict(data.material), "fit": PHYSICS_FIT,
+                        "options": options.to_json(), "fps": sorted({c.fps for c in data.clips})},
             "coarse_run": _coarse_run_record(coarse) if coarse is not None else None,
             "body_model_sha256": body.sha256, "torch": torch.__version__}
     _atomic_text(json.dumps(info, indent=2, sort_keys=True) + "\n", run_dir / RUN)
     against = "skinning" if tier is Tier.COARSE else "the coarse garment"
     history: list[EpochRecord] = []
     best_loss, best_epoch = math.inf, -1
+    terms_rows: list[tuple[int, _Validation]] = []
     for epoch in range(config.epochs):
         began = time.perf_counter()
-        lr, batches = _start_epoch(model, optimizer, train_clips, config, epoch)
+        lr, _ = _start_epoch(model, optimizer, train_clips, config, epoch)
+        batches = window_batches(train_clips, config.batch, np.random.default_rng([config.seed, epoch]),
+                                 window=options.window)
+        if config.max_batches:
+            batches = batches[:config.max_batches]
         total = 0.0
-        for k, frames in batches:
+        for k, t in batches:
             clip = train_clips[k]
-            inp = step.inputs(clip, frames)
-            total += _step(model, optimizer, _energy(clip, step.forward(model, clip, inp), inp, data.material).mean(),
-                           config.grad_clip)
-        val_loss, val_mm = _validate(model, step, val_clips, config, data.material)
-        record = EpochRecord(epoch=epoch, train_loss=total / max(len(batches), 1), val_loss=val_loss, val_mm=val_mm,
-                             lr=lr, seconds=time.perf_counter() - began)
+            win = _window(step, clip, t, options)
+            loss = _terms(clip, step.forward(model, clip, win.inputs), win, data.material, options)["total"].mean()
+            total += _step(model, optimizer, loss, config.grad_clip)
+        val = _validate(model, step, val_clips, config, data.material, options)
+        record = EpochRecord(epoch=epoch, train_loss=total / max(len(batches), 1), val_loss=val.relative,
+                             val_mm=val.mm, lr=lr, seconds=time.perf_counter() - began)
         best_loss, best_epoch = _record_epoch(run_dir, model, optimizer, history, record, best_loss, best_epoch)
-        plot_history(history, run_dir / CURVE, title=f"{tier.value} (physics): {run_dir.name}",
-                     loss_label=f"energy [J] (validation: relative to {against})",
+        terms_rows.append((epoch, val))
+        _write_val_terms(run_dir / VAL_TERMS, terms_rows)
+        plot_history(history, run_dir / CURVE, title=f"{tier.value} (physics{', dynamic' if options.dynamic else ''}): "
+                     f"{run_dir.name}", loss_label=f"energy [J] (validation: relative to {against})",
                      mm_label=f"validation: distance from {against} [mm]", log_loss=False)
         log.info("physics %s epoch %d: train %.4g J, val %+.4g J vs %s (%.1f mm from it), %.1f s", tier.value,
-                 epoch, record.train_loss, val_loss, against, val_mm, record.seconds)
+                 epoch, record.train_loss, record.val_loss, against, val.mm, record.seconds)
         if progress is not None:
             progress(record)
     if not history:

@@ -1,0 +1,161 @@
+"""Motion capture as a data set motion: a BVH clip retargeted to SMPL, at natural speed, eased in.
+
+A cloth simulation starts from the garment draped on the rest (T-) pose, so a real clip
+cannot start at its first captured frame: the body would jump into a pose the garment
+never followed. :func:`mocap_motion` turns a stretch of a BVH file into a sequence that
+
+1. starts facing +Z at the origin: the clip's heading and position at its first frame
+   are taken out of every frame (a turn about +Y and a shift on the floor), so the ease
+   below never spins or slides the body;
+2. **eases in** from the rest pose to the clip's first pose over ``ease_seconds``
+   (slerp per joint from the identity, a smooth step in time);
+3. plays the clip at its own speed, resampled to ``fps``, its root's movement ramped in
+   over the first ``ramp_seconds`` (a walk accelerates from standing instead of starting
+   at full speed in one frame).
+
+The ease and the ramp are the **warm-up**: the garment is still catching up with the
+body there. Their frame count is returned (and recorded in the job's ``meta`` as
+``warmup_frames`` by the factory); training and evaluation leave those frames out.
+Shape letters: T frames.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from ..core.heading import root_yaw, yaw_matrices
+from ..errors import ArgumentError, MotionFileError
+from .bvh import BVH_RIGS, read_bvh, retarget_bvh, rig_mapping, synthetic_first_frame, trim_bvh
+
+__all__ = ["MocapSpec", "MocapMotion", "mocap_motion"]
+
+
+@dataclass(frozen=True)
+class MocapSpec:
+    """A stretch of one BVH file as a data set motion; the same spec gives the same sequence."""
+
+    bvh: str
+    """The file, relative to the mocap folder (``--mocap``); e.g. ``cmu/05/05_02.bvh``."""
+    start_seconds: float = 0.0
+    """Where the stretch starts in the file [s] (after CMU's prepended T-pose frame), >= 0."""
+    seconds: float = 4.0
+    """How much of the clip is played [s], > 0; the ramp is part of it, the ease is not."""
+    fps: float = 30.0
+    """Output frame rate [1/s], > 0; must equal the simulation's."""
+    ease_seconds: float = 1.0
+    """The ease-in from the rest pose before the clip [s], > 0."""
+    ramp_seconds: float = 0.5
+    """The root's movement ramps in over the clip's first ``ramp_seconds`` [s], >= 0."""
+    name: str | None = None
+    """The motion's label in sequence names; None: the file's stem and the start."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.bvh, str) or not self.bvh:
+            raise ArgumentError(f"MocapSpec.bvh must be a file name, got {self.bvh!r}")
+        for key, low, strict in (("start_seconds", 0.0, False), ("seconds", 0.0, True), ("fps", 0.0, True),
+                                 ("ease_seconds", 0.0, True), ("ramp_seconds", 0.0, False)):
+            value = getattr(self, key)
+            if not isinstance(value, (int, float)) or not np.isfinite(value) or value < low or (strict and value == low):
+                raise ArgumentError(f"MocapSpec.{key} must be {'>' if strict else '>='} {low:g}, got {value!r}")
+        if self.ramp_seconds > self.seconds:
+            raise ArgumentError(f"MocapSpec.ramp_seconds ({self.ramp_seconds}) is longer than the clip "
+                                f"({self.seconds} s)")
+
+    @property
+    def label(self) -> str:
+        """The motion's name in sequence names (letters, digits, '-', '_', '.')."""
+        if self.name:
+            return self.name
+        path = Path(self.bvh)
+        stem = path.stem if path.parent.name in path.stem else f"{path.parent.name}{path.stem}"
+        stem = "".join(c for c in stem if c.isalnum())
+        return f"mocap-{stem}-t{self.start_seconds:g}".replace(".", "p")
+
+
+@dataclass(frozen=True)
+class MocapMotion:
+    """A retargeted, eased-in clip."""
+
+    poses: np.ndarray
+    """(T, 72) float64 axis-angle [rad]; frame 0 is the rest pose."""
+    transl: np.ndarray
+    """(T, 3) float64 root offset [m]; zero over the ease."""
+    warmup_frames: int
+    """The ease and the ramp: the first frames, left out of training and evaluation."""
+    source: dict
+    """Provenance: the file (as named in the spec), its sha256, rig and the file frames used."""
+
+
+def mocap_motion(spec: MocapSpec, mocap_dir: str | Path, *, smpl_joints: np.ndarray | None = None) -> MocapMotion:
+    """Read, retarget and ease in the stretch of a BVH file that ``spec`` names.
+
+    Args:
+        spec: which file, which stretch, at what rate.
+        mocap_dir: the folder ``spec.bvh`` is relative to.
+        smpl_joints: (24, 3) rest joints the retargeting aims the bones at (the embedded
+            mean shape when None).
+    Raises:
+        MotionFileError: the file is missing, unreadable or of an unknown rig; the stretch
+            lies outside it (each names the file).
+    """
+    path = Path(mocap_dir) / spec.bvh
+    if not path.is_file():
+        raise MotionFileError(f"{path}: no such BVH file (the motion {spec.bvh!r} is relative to the mocap "
+                              f"folder {mocap_dir})")
+    bvh = read_bvh(path)
+    rig, mapping = rig_mapping(bvh, None)
+    if not mapping:
+        raise MotionFileError(f"{path}: its joints ({', '.join(bvh.names[:6])}, ...) follow no known BVH rig "
+                              f"(known: {', '.join(BVH_RIGS)})")
+    first = 1 if synthetic_first_frame(bvh, rig) else 0
+    start = first + int(round(spec.start_seconds * bvh.fps))
+    stop = start + int(np.ceil(spec.seconds * bvh.fps))
+    if stop >= bvh.num_frames:
+        have = (bvh.num_frames - 1 - first) / bvh.fps
+        raise MotionFileError(f"{path}: {spec.start_seconds:g} s + {spec.seconds:g} s is past the end of the clip "
+                              f"({have:.2f} s of motion)")
+    poses, root = retarget_bvh(trim_bvh(bvh, start, stop), mapping=mapping, fps=spec.fps, up_axis=None,
+                               blend_seconds=0.0, smpl_joints=smpl_joints)
+    n_clip = int(round(spec.seconds * spec.fps))
+    poses, root = poses[:n_clip], root[:n_clip]
+    poses, root = _face_forward(poses, root)
+    ramp = int(round(spec.ramp_seconds * spec.fps))
+    root = _ramp_root(root, ramp)
+    ease = int(round(spec.ease_seconds * spec.fps))
+    lead = _ease_to(poses[0], ease)
+    poses = np.concatenate([lead, poses])
+    transl = np.concatenate([np.zeros((ease, 3)), root])
+    source = {"bvh": spec.bvh, "sha256": hashlib.sha256(path.read_bytes()).hexdigest(), "rig": rig,
+              "file_frames": [start, stop], "file_fps": bvh.fps}
+    return MocapMotion(poses=poses, transl=transl, warmup_frames=ease + ramp, source=source)
+
+
+def _face_forward(poses: np.ndarray, root: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Take the first frame's heading out of every frame (root rotation and root path)."""
+    turn = yaw_matrices(-root_yaw(poses[:1]))[0]
+    out = poses.copy()
+    out[:, :3] = (Rotation.from_matrix(turn) * Rotation.from_rotvec(poses[:, :3])).as_rotvec()
+    return out, (root - root[:1]) @ turn.T
+
+
+def _ramp_root(root: np.ndarray, frames: int) -> np.ndarray:
+    """The root path with its velocity scaled by a smooth step 0 -> 1 over the first ``frames``."""
+    if frames <= 0 or len(root) < 2:
+        return root.copy()
+    step = np.diff(root, axis=0)
+    k = np.arange(1, len(root))
+    scale = np.where(k < frames, 0.5 - 0.5 * np.cos(np.pi * k / frames), 1.0)
+    return np.concatenate([root[:1], root[:1] + np.cumsum(step * scale[:, None], axis=0)])
+
+
+def _ease_to(pose: np.ndarray, frames: int) -> np.ndarray:
+    """(frames, 72) from the rest pose toward ``pose`` (72,), a smooth step: frame 0 is the rest
+    pose, the clip's first frame follows the last one."""
+    s = 0.5 - 0.5 * np.cos(np.pi * np.arange(frames) / frames)
+    rot = Rotation.from_rotvec(pose.reshape(24, 3)).as_rotvec()  # the shortest rotation vector per joint
+    return (s[:, None, None] * rot[None]).reshape(frames, 72)
