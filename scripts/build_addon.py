@@ -73,11 +73,17 @@ def _preference(wheel: Path, platform: str) -> tuple[int, str]:
     return next((i for i, tag in enumerate(tags) if tag in wheel.name), len(tags)), wheel.name
 
 
-def pip(*args: str) -> None:
-    """Run pip quietly; its output is shown only when it fails."""
+#: The exit status when a pinned wheel is neither in the cache nor downloadable (offline):
+#: the one build failure the add-on tests may skip on. Every other failure exits 1.
+WHEELS_UNAVAILABLE = 3
+
+
+def pip(*args: str, status: int = 1) -> None:
+    """Run pip quietly; its output is shown only when it fails (exit ``status``)."""
     done = subprocess.run([sys.executable, "-m", "pip", *args], capture_output=True, text=True)
     if done.returncode:
-        sys.exit(f"{done.stdout}{done.stderr}build_addon: pip {' '.join(args)} failed")
+        sys.stderr.write(f"{done.stdout}{done.stderr}build_addon: pip {' '.join(args)} failed\n")
+        sys.exit(status)
 
 
 def build_cloth_usd_wheel(out: Path) -> Path:
@@ -103,11 +109,13 @@ def third_party_wheels(platforms: list[str], cache: Path, offline: bool) -> list
             found = [w for w in cache.glob(f"{name}-{version}-*.whl") if wheel_serves(w, platform)]
             if not found:
                 if offline:
-                    sys.exit(f"build_addon: no {name}=={version} wheel for {platform} in {cache} "
-                             "(run once without --offline)")
+                    sys.stderr.write(f"build_addon: no {name}=={version} wheel for {platform} in {cache} "
+                                     "(run once without --offline)\n")
+                    sys.exit(WHEELS_UNAVAILABLE)
                 tags = [a for tag in PLATFORMS[platform][0] for a in ("--platform", tag)]
                 pip("download", "--no-deps", "--only-binary=:all:", "--implementation", "cp",
-                    "--python-version", BLENDER_PYTHON, *tags, "-d", str(cache), f"{name}=={version}")
+                    "--python-version", BLENDER_PYTHON, *tags, "-d", str(cache), f"{name}=={version}",
+                    status=WHEELS_UNAVAILABLE)
                 found = [w for w in cache.glob(f"{name}-{version}-*.whl") if wheel_serves(w, platform)]
             chosen.add(min(found, key=lambda w: _preference(w, platform)))
     return sorted(chosen)
