@@ -431,7 +431,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         sys.stderr.write("cloth-usd: interrupted; no output was written\n")
         return 130
     except _Terminated:  # the temporary files were removed on the way out (CacheLayerWriter)
-        done = {"bake": "; nothing was written",
+        done = {"bake": "; nothing partial was left (a cache and its shot are written whole, together, or not at all)",
                 "batch": "; jobs that had finished keep their outputs, the others wrote nothing"}
         sys.stderr.write(f"cloth-usd: interrupted (SIGTERM){done.get(args.command, '')}\n")
         return 128 + signal.SIGTERM

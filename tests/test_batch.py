@@ -348,3 +348,75 @@ def test_jobs_carry_a_joint_map_and_strict_to_their_bakes(shots, tmp_path, capsy
     (tmp_path / "bad.toml").write_text('[[jobs]]\nstage = "a.usda"\nstrict = "yes"\n')
     with pytest.raises(ArgumentError, match="strict must be true or false"):
         load_jobs(tmp_path / "bad.toml")
+
+
+def test_a_chunked_batch_makes_its_missing_out_dir(shots, tmp_path):
+    """Chunk folders (and plain bakes) in an out_dir that does not exist yet: the batch makes it."""
+    out = tmp_path / "new" / "deeper"
+    jobs = [Job(name="long", stage=shots / "shot_a.usda", output=out / "long.usdc", frames=FrameRange(1, 12)),
+            Job(name="short", stage=shots / "shot_a.usda", output=out / "short.usdc", frames=FrameRange(1, 3))]
+    report = run_batch(jobs, workers=2, chunk_frames=CHUNK)
+    assert [(j.status, j.error) for j in report.jobs] == [(JobStatus.DONE, None)] * 2
+    assert sorted(p.name for p in out.iterdir()) == ["long.usdc", "short.usdc"]
+    assert Sdf.Layer.OpenAsAnonymous(str(out / "long.usdc")).GetNumTimeSamplesForPath("/Char/Tube0.points") == 12
+
+
+def _descendants(pid: int) -> set[int]:
+    """Every live process below ``pid`` (Linux /proc)."""
+    children: dict[int, list[int]] = {}
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            except (OSError, IndexError, ValueError):
+                continue
+            children.setdefault(ppid, []).append(int(entry.name))
+    found, todo = set(), [pid]
+    while todo:
+        for child in children.get(todo.pop(), []):
+            found.add(child)
+            todo.append(child)
+    return found
+
+
+def _alive(pid: int) -> bool:
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
+    except (OSError, IndexError):
+        return False
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="finds the workers in /proc")
+def test_workers_of_a_killed_batch_exit_quietly_and_leave_no_temporary_file(tmp_path):
+    import signal
+    import subprocess
+
+    sample = Path(__file__).resolve().parents[1] / "samples" / "walk_tshirt" / "scene.usda"
+    out = tmp_path / "out"
+    out.mkdir()
+    jobs = {"jobs": [{"stage": str(sample), "output": str(out / f"{i}.usdc"), "frames": "1001:9000",
+                      "tier": "skinning"} for i in range(2)]}
+    (tmp_path / "jobs.json").write_text(json.dumps(jobs))
+    with open(tmp_path / "stderr", "wb") as err:
+        parent = subprocess.Popen([sys.executable, "-c", "import sys; from cloth_usd.cli import main; "
+                                   "sys.exit(main(sys.argv[1:]))", "batch", str(tmp_path / "jobs.json"),
+                                   "--workers", "2"], stderr=err, stdout=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 120
+        while len(list(out.glob(".*.tmp.usdc"))) < 2:  # both workers are writing their caches
+            assert parent.poll() is None and time.monotonic() < deadline, (tmp_path / "stderr").read_text()
+            time.sleep(0.05)
+        below = _descendants(parent.pid)
+        assert len(below) >= 3  # the forkserver and two workers
+        parent.send_signal(signal.SIGKILL)
+        parent.wait()
+        deadline = time.monotonic() + 30
+        while any(_alive(p) for p in below) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert not any(_alive(p) for p in below), "workers outlived their batch"
+    finally:
+        if parent.poll() is None:
+            parent.kill()
+    text = (tmp_path / "stderr").read_text()
+    assert "Traceback" not in text and "Error" not in text, text
+    assert list(out.iterdir()) == []  # each worker removed its temporary file on the way out

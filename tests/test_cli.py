@@ -251,7 +251,8 @@ def test_sigterm_mid_bake_removes_the_temporary_files_and_says_so(tmp_path):
     finally:
         proc.kill()
     assert proc.returncode == 143, (out, err)
-    assert err == "cloth-usd: interrupted (SIGTERM); nothing was written\n"
+    assert err == ("cloth-usd: interrupted (SIGTERM); nothing partial was left "
+                                       "(a cache and its shot are written whole, together, or not at all)\n")
     assert sorted(p.name for p in tmp_path.iterdir()) == []
 
 

@@ -26,7 +26,7 @@ from ..core.scene import Character, Tier
 from ..errors import ArgumentError
 from ..usd.provenance import to_custom_data
 from ..usd.read import garment_from_internal, read_motion
-from ..usd.write import CacheLayerWriter, check_output_path, remove_stale_temps, write_shot_layer
+from ..usd.write import CacheLayerWriter, check_output_path, remove_stale_temps, stage_shot_layer, write_shot_layer
 from .cache import ModelCache
 from .garment import bake_garment, range_notes
 from .plan import ResolvedBake, is_current, open_scene, resolve
@@ -117,12 +117,17 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
         joint_map: ``{their joint name: SMPL joint name}`` or a JSON / TOML file of it, for
             skeletons named in no known convention (:mod:`cloth_usd.core.joint_names`).
         max_cache_bytes: refuse a bake whose cache (:func:`~cloth_usd.baking.size.cache_bytes`)
-            would be larger; None: :data:`~cloth_usd.baking.size.MAX_CACHE_BYTES` or the memory
-            available, whichever is less.
+            would be larger; None: :data:`~cloth_usd.baking.size.MAX_CACHE_BYTES`, and the
+            cache must fit the free space of its folder and the frames' motion the memory
+            available (:func:`~cloth_usd.baking.size.check_size`). The cache itself is
+            written in bounded memory (:data:`~cloth_usd.usd.write.FLUSH_BYTES` of points
+            held at a time), whatever its length.
 
     Raises:
         ArgumentError: among others, ``shot`` is the same file as ``output``, or the cache
-            would be too large to build (both before anything is computed).
+            would be too large (both before anything is computed).
+        OutputWriteError: a layer could not be saved (a full disk names the file and says
+            "no space left on device"); neither the cache nor the shot layer is written.
     """
     began = time.perf_counter()
     cache = cache or ModelCache()
@@ -135,7 +140,7 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
         check_output_path(shot, force=force or skip_current, protected=protected)
     plan = resolve(stage, protected, frames=frames, garments=garments, tier=tier, body_model=body_model,
                    models=models, cache=cache, joint_map=joint_map)
-    check_size(plan, max_cache_bytes)
+    check_size(plan, max_cache_bytes, output=output)
     scene, times = plan.scene, plan.frames.times()
     scene_file = Path(stage.GetRootLayer().realPath)
     if skip_current and is_current(output, plan):
@@ -174,11 +179,17 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
                                         batch_size=batch_size, cache=cache, notes=notes,
                                         source=scene.stage.identifier, on_progress=on_progress,
                                         strict=strict, guard=guard))
-        cache_path = writer.commit(to_custom_data(_provenance(plan, reports)))
-    shot_path = None
-    if shot is not None:
-        shot_path = write_shot_layer(shot, cache=cache_path, scene=scene_file,
-                                     stage=scene.stage, start=times[0], end=times[-1],
-                                     force=force, protected=protected)
+        # Both layers are saved under temporary names before either is renamed: a full disk or
+        # SIGTERM leaves neither, never a cache without its shot.
+        try:
+            together = [] if shot is None else [stage_shot_layer(shot, cache=writer.path, scene=scene_file,
+                                                                 stage=scene.stage, start=times[0], end=times[-1],
+                                                                 force=force, protected=protected)]
+            cache_path = writer.commit(to_custom_data(_provenance(plan, reports)), together=together)
+        except BaseException:  # SIGTERM too, wherever it came: the shot's temporary file goes with the cache's
+            if shot is not None:
+                remove_stale_temps(shot)
+            raise
+    shot_path = None if shot is None else Path(shot)
     return BakeResult(cache=cache_path, shot=shot_path, times=times, garments=tuple(reports),
                       seconds=time.perf_counter() - began, inputs_sha256=plan.inputs_sha256)

@@ -6,6 +6,7 @@ import multiprocessing
 import multiprocessing.connection
 import os
 import signal
+import threading
 import time
 
 from .tasks import KILL_HOOK_ENV, Event, Task, run_task, worker_init
@@ -25,23 +26,58 @@ class _Worker:
         self.since = 0.0
 
 
+class _ParentGone(BaseException):
+    """Raised in a worker whose batch parent died: the task stops (its ``with`` blocks remove
+    its temporary files) and the worker exits quietly."""
+
+
+def _on_sigterm(signum, frame) -> None:
+    raise _ParentGone()
+
+
+def _watch_parent(conn, running: list[int]) -> None:
+    """SIGTERM this worker when its pipe turns readable while it runs a task: the parent died
+    (end of file) or is closing the pool (it sends nothing else to a busy worker)."""
+    while True:
+        task = running[0]
+        if task and multiprocessing.connection.wait([conn], _PARENT_POLL_S) and running[0] == task:
+            os.kill(os.getpid(), signal.SIGTERM)
+            return
+        if not task:
+            time.sleep(_PARENT_POLL_S)
+
+
+#: How often an idle worker's watch looks again, and how long a busy one waits on its pipe [s].
+_PARENT_POLL_S = 0.5
+
+
 def _worker_main(conn, kill_hook: str | None = None) -> None:
-    """A local worker: run tasks from the pipe until it closes."""
+    """A local worker: run tasks from the pipe until it closes, or until the batch is gone
+    (the parent died or closed the pool, the pipe broke, SIGTERM): then exit quietly, without
+    a traceback; a task cut short removes its temporary files on the way out."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent handles Ctrl-C
+    signal.signal(signal.SIGTERM, _on_sigterm)
+    running = [0]  # the number of the task running, 0 between tasks
+    threading.Thread(target=_watch_parent, args=(conn, running), daemon=True).start()
     if kill_hook:
         os.environ[KILL_HOOK_ENV] = kill_hook
     else:
         os.environ.pop(KILL_HOOK_ENV, None)
-    worker_init()
-    while True:
-        try:
+    try:
+        worker_init()
+        count = 0
+        while True:
             message = conn.recv()
-        except (EOFError, OSError):
-            return
-        if message is None:
-            return
-        tid, task = message
-        conn.send((tid, run_task(task)))
+            if message is None:
+                return
+            tid, task = message
+            count += 1
+            running[0] = count
+            result = run_task(task)
+            running[0] = 0
+            conn.send((tid, result))
+    except (EOFError, OSError, _ParentGone):  # the parent is gone: nobody to report to
+        return
 
 
 def _death(exitcode: int | None) -> str:

@@ -143,8 +143,8 @@ def _kill_hook(task: Task) -> Callable[..., None] | None:
 def _run(task: Task) -> TaskResult:
     hook = _kill_hook(task)
     job = task.job
-    if task.kind is Kind.CHUNK:
-        task.output.parent.mkdir(exist_ok=True)
+    if task.kind in (Kind.BAKE, Kind.CHUNK):  # a batch makes its out_dir (and a job's chunk folder)
+        task.output.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(task.output)  # left by an attempt killed mid-write
     common = dict(frames=task.frames, garments=job.garments, tier=job.tier, body_model=job.body_model,
                   models=list(job.models) if job.models else None, cache=_CACHE, joint_map=job.joint_map)

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import errno
 import io
 import json
 import math
@@ -24,14 +25,14 @@ import os
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import torch
 
 from ..core.files import file_sha256
 from ..core.heading import Heading
 from ..core.scene import Tier
-from ..errors import ArgumentError
+from ..errors import ArgumentError, OutputWriteError
 from .config import TrainConfig, build_model, trainable
 from .models import CoarseGenerator, DetailGenerator
 
@@ -113,22 +114,59 @@ def load_run(run_dir: str | Path, *, device: torch.device | str = "cpu", best: b
     return Run(path=run_dir, tier=tier, config=config, info=info, model=model.eval(), epoch=int(state["epoch"]))
 
 
-def atomic_save(obj: Any, path: Path) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
+def _write_failed(path: Path, exc: OSError) -> OutputWriteError:
+    if exc.errno == errno.ENOSPC:
+        return OutputWriteError(f"{path}: no space left on device; free some space in '{path.parent}' and run "
+                                "again; the file was left as it was")
+    return OutputWriteError(f"{path}: could not be written ({exc.strerror or exc}); the file was left as it was")
+
+
+def _atomic(write: Callable[[str], None], path: Path) -> None:
+    """``write(temporary path)``, then rename it to ``path``; OutputWriteError (and no
+    temporary file) when either fails."""
+    tmp = None
     try:
-        torch.save(obj, tmp)
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+        os.close(fd)
+        write(tmp)
         os.replace(tmp, path)
+    except OSError as exc:
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
+        raise _write_failed(path, exc) from None
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        if tmp is not None:
+            Path(tmp).unlink(missing_ok=True)
         raise
 
 
+def atomic_save(obj: Any, path: Path) -> None:
+    """``torch.save`` to a temporary file beside ``path``, renamed into place.
+
+    Raises:
+        OutputWriteError: the file could not be written (a full disk); nothing is left behind.
+    """
+    buf = io.BytesIO()  # serialised first, so a full disk is Python's OSError, not torch's RuntimeError
+    torch.save(obj, buf)
+
+    def write(tmp: str) -> None:
+        with open(tmp, "wb") as fh:
+            fh.write(buf.getbuffer())
+
+    _atomic(write, path)
+
+
 def atomic_text(text: str, path: Path) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    with os.fdopen(fd, "w") as fh:
-        fh.write(text)
-    os.replace(tmp, path)
+    """``text`` to a temporary file beside ``path``, renamed into place.
+
+    Raises:
+        OutputWriteError: the file could not be written (a full disk); nothing is left behind.
+    """
+    def write(tmp: str) -> None:
+        with open(tmp, "w") as fh:
+            fh.write(text)
+
+    _atomic(write, path)
 
 
 @dataclass(frozen=True)

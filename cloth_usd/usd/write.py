@@ -8,17 +8,29 @@ for its own targets; the CLI turns SIGTERM into an exception, so the writer remo
 temporary file itself); an existing
 file is only replaced with ``force``; a layer the source stage uses is never a target.
 Frame-chunk caches of one bake are joined into one layer by :func:`stitch_layers`.
+
+Long caches are written in bounded memory: :class:`CacheLayerWriter` saves its temporary
+``.usdc`` whenever :data:`FLUSH_BYTES` of new samples are held (a crate file saved again
+appends to itself and then reads the saved samples from disk), so a bake holds one flush of
+points at a time, whatever its length. A ``.usda`` target is staged the same way in a
+temporary ``.usdc`` and exported to text at the end. A cache and its shot layer are both saved
+under temporary names before either is renamed (:func:`commit_layers`), and SIGTERM and SIGINT
+wait for the renames, so the pair is committed together or not at all.
 """
 
 from __future__ import annotations
 
+import errno
 import logging
 import os
 import re
+import signal
 import tempfile
+import threading
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Iterable, Iterator, Mapping, Sequence
 
 import numpy as np
 from pxr import Sdf, Tf, Vt
@@ -26,12 +38,17 @@ from pxr import Sdf, Tf, Vt
 from ..core.scene import StageInfo
 from ..errors import ArgumentError, OutputExistsError, OutputWriteError
 
-__all__ = ["CacheLayerWriter", "CacheInfo", "write_shot_layer", "check_output_path", "cache_layer_info",
-           "stitch_layers", "remove_stale_temps"]
+__all__ = ["FLUSH_BYTES", "CacheLayerWriter", "CacheInfo", "StagedLayer", "commit_layers", "stage_shot_layer",
+           "write_shot_layer", "check_output_path", "cache_layer_info", "stitch_layers", "remove_stale_temps"]
 
 log = logging.getLogger(__name__)
 
 _FORMATS = {".usdc", ".usda", ".usd"}
+
+#: New time-sample bytes a :class:`CacheLayerWriter` holds before it saves them to its
+#: temporary file (and :func:`stitch_layers` before it saves what it copied). A cache under
+#: this size is saved once, at its commit.
+FLUSH_BYTES = 64 * 2 ** 20
 
 
 def check_output_path(path: str | Path, *, force: bool, protected: Iterable[str] = ()) -> Path:
@@ -77,8 +94,9 @@ def remove_stale_temps(path: str | Path) -> list[Path]:
         The files removed.
     """
     path = Path(path)
-    # tempfile.mkstemp puts 8 random characters between prefix and suffix.
-    pattern = re.compile(rf"^\.{re.escape(path.stem)}\.[A-Za-z0-9_]{{8}}\.tmp{re.escape(path.suffix)}$")
+    # tempfile.mkstemp puts 8 random characters between prefix and suffix; a .usda target
+    # is staged in the same name plus .usdc.
+    pattern = re.compile(rf"^\.{re.escape(path.stem)}\.[A-Za-z0-9_]{{8}}\.tmp{re.escape(path.suffix)}(\.usdc)?$")
     removed = []
     if path.parent.is_dir():
         for entry in path.parent.iterdir():
@@ -90,14 +108,101 @@ def remove_stale_temps(path: str | Path) -> list[Path]:
     return removed
 
 
-def _commit(layer: Sdf.Layer, tmp: Path, path: Path, force: bool) -> None:
-    if not layer.Save():
+def _no_space(text: str, exc: BaseException | None = None) -> bool:
+    return getattr(exc, "errno", None) == errno.ENOSPC or "No space left on device" in text
+
+
+def _write_error(path: Path, exc: BaseException, tmp: Path | None = None) -> OutputWriteError:
+    """The one-line :class:`OutputWriteError` of a failed save or rename of ``path``."""
+    text = str(exc)
+    where = f" (writing {tmp.name})" if tmp is not None else ""
+    if _no_space(text, exc):
+        return OutputWriteError(f"{path}: no space left on device{where}; free some space in '{path.parent}' "
+                                "and run again; nothing was written")
+    lines = [line.strip() for line in text.splitlines() if line.strip()]
+    reason = getattr(exc, "strerror", None) or (lines[-1].rsplit(" : ", 1)[-1].strip("'") if lines else "")
+    return OutputWriteError(f"{path}: could not be written{where}: {reason or type(exc).__name__}; check the "
+                            "folder's permissions and free space; nothing was written")
+
+
+def _save(layer: Sdf.Layer, tmp: Path, path: Path) -> None:
+    """Save ``layer`` (at ``tmp``), or OutputWriteError naming ``path``."""
+    try:
+        saved = layer.Save()
+    except (Tf.ErrorException, OSError) as exc:
+        raise _write_error(path, exc, tmp) from None
+    if not saved:
         raise OutputWriteError(f"{path}: USD could not save the layer (to {tmp}); check the folder's "
-                               "permissions and free space")
-    if path.exists() and not force:
+                               "permissions and free space; nothing was written")
+
+
+@dataclass(frozen=True)
+class StagedLayer:
+    """A layer saved under a temporary name beside its target, waiting for :func:`commit_layers`."""
+
+    tmp: Path
+    path: Path
+    force: bool
+
+    def discard(self) -> None:
+        self.tmp.unlink(missing_ok=True)
+
+
+@contextmanager
+def _signals_deferred() -> Iterator[None]:
+    """SIGTERM and SIGINT wait until the block is left, then are delivered (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[int] = []
+    previous = {s: signal.signal(s, lambda signum, frame: caught.append(signum))
+                for s in (signal.SIGTERM, signal.SIGINT)}
+    try:
+        yield
+    finally:
+        for s, handler in previous.items():
+            signal.signal(s, signal.SIG_DFL if handler is None else handler)
+        for s in caught:
+            signal.raise_signal(s)  # now to the handler that was there
+
+
+def commit_layers(staged: Sequence[StagedLayer]) -> None:
+    """Rename saved temporary layers into place, all or none.
+
+    Every target is checked first (one that appeared meanwhile without ``force`` is an
+    OutputExistsError and nothing is renamed); SIGTERM and SIGINT wait for the renames.
+    A rename that fails removes the targets renamed before it, so a cache is never left
+    without its shot layer. On any error every temporary file is removed.
+    """
+    try:
+        for s in staged:
+            if s.path.exists() and not s.force:
+                raise OutputExistsError(f"{s.path}: appeared while baking; pass --force to replace it")
+        done: list[StagedLayer] = []
+        with _signals_deferred():
+            try:
+                for s in staged:
+                    os.replace(s.tmp, s.path)
+                    done.append(s)
+            except OSError as exc:
+                for d in done:
+                    d.path.unlink(missing_ok=True)
+                failed = staged[len(done)]
+                undone = (f"; {', '.join(str(d.path) for d in done)} removed again (written with it)"
+                          if done else "")
+                raise OutputWriteError(f"{_write_error(failed.path, exc, failed.tmp)}{undone}") from None
+    finally:
+        for s in staged:
+            s.discard()
+
+
+def _commit(layer: Sdf.Layer, tmp: Path, path: Path, force: bool) -> None:
+    try:
+        _save(layer, tmp, path)
+    except BaseException:
         tmp.unlink(missing_ok=True)
-        raise OutputExistsError(f"{path}: appeared while baking; pass --force to replace it")
-    os.replace(tmp, path)
+        raise
+    commit_layers([StagedLayer(tmp, path, force)])
 
 
 def _copy_stage_metadata(layer: Sdf.Layer, stage: StageInfo, start: float, end: float) -> None:
@@ -121,17 +226,26 @@ class CacheLayerWriter:
     """
 
     def __init__(self, path: str | Path, *, stage: StageInfo, start: float, end: float,
-                 force: bool = False, protected: Iterable[str] = ()) -> None:
+                 force: bool = False, protected: Iterable[str] = (), flush_bytes: int | None = None) -> None:
         self.path = check_output_path(path, force=force, protected=protected)
         self.force = force
+        self.flush_bytes = FLUSH_BYTES if flush_bytes is None else int(flush_bytes)
         self._tmp = _temp_path(self.path)
-        self._layer = Sdf.Layer.CreateNew(str(self._tmp))
+        # A text layer cannot be saved incrementally: stage it in a crate file, export at the end.
+        self._staging = self._tmp.with_name(self._tmp.name + ".usdc") if self.path.suffix == ".usda" else self._tmp
+        self._committed = False
+        try:
+            self._layer = Sdf.Layer.CreateNew(str(self._staging))
+        except Tf.ErrorException as exc:
+            self._remove_temps()
+            raise _write_error(self.path, exc, self._staging) from None
         if self._layer is None:
-            raise OutputWriteError(f"{self.path}: USD could not create a layer (at {self._tmp}); check "
+            self._remove_temps()
+            raise OutputWriteError(f"{self.path}: USD could not create a layer (at {self._staging}); check "
                                    "the folder's permissions and free space")
         _copy_stage_metadata(self._layer, stage, start, end)
         self._attrs: dict[str, tuple[Sdf.Path, Sdf.Path]] = {}
-        self._committed = False
+        self._pending = 0  # bytes of samples set since the last save
 
     def __enter__(self) -> "CacheLayerWriter":
         return self
@@ -168,18 +282,53 @@ class CacheLayerWriter:
             self._layer.SetTimeSample(pts_path, float(t), Vt.Vec3fArray.FromNumpy(points[i]))
             self._layer.SetTimeSample(ext_path, float(t), Vt.Vec3fArray.FromNumpy(
                 np.stack([lo[i], hi[i]])))
+        self._pending += points.nbytes + 24 * points.shape[0]
+        if self._pending >= self.flush_bytes:
+            self.flush()
 
-    def commit(self, provenance: Mapping[str, Any]) -> Path:
-        """Record provenance in ``customLayerData``, save, and rename into place."""
-        self._layer.customLayerData = dict(provenance)
-        _commit(self._layer, self._tmp, self.path, self.force)
+    def flush(self) -> None:
+        """Save the samples added so far to the temporary file; the layer then reads them from
+        there, so the memory they held is freed."""
+        _save(self._layer, self._staging, self.path)
+        self._pending = 0
+
+    def commit(self, provenance: Mapping[str, Any], *, together: Sequence[StagedLayer] = ()) -> Path:
+        """Record provenance in ``customLayerData``, save, and rename into place.
+
+        Args:
+            together: layers already saved (:func:`stage_shot_layer`) that are renamed into
+                place with the cache, all or none (:func:`commit_layers`); they are
+                discarded when the cache cannot be saved.
+        """
+        try:
+            self._layer.customLayerData = dict(provenance)
+            self.flush()
+            if self._staging != self._tmp:
+                try:
+                    exported = self._layer.Export(str(self._tmp))
+                except Tf.ErrorException as exc:
+                    raise _write_error(self.path, exc, self._tmp) from None
+                if not exported:
+                    raise OutputWriteError(f"{self.path}: USD could not save the layer (to {self._tmp}); check "
+                                           "the folder's permissions and free space; nothing was written")
+                self._staging.unlink(missing_ok=True)
+            commit_layers([StagedLayer(self._tmp, self.path, self.force), *together])
+        except BaseException:
+            for s in together:
+                s.discard()
+            self.abort()
+            raise
         self._committed = True
         log.info("wrote %s", self.path)
         return self.path
 
-    def abort(self) -> None:
-        """Drop the temporary file; the target is left as it was."""
+    def _remove_temps(self) -> None:
         self._tmp.unlink(missing_ok=True)
+        self._staging.unlink(missing_ok=True)
+
+    def abort(self) -> None:
+        """Drop the temporary files; the target is left as it was."""
+        self._remove_temps()
         self._committed = True
 
 
@@ -190,25 +339,42 @@ def _relative(target: Path, start: Path) -> str:
         return str(target.resolve())
 
 
-def write_shot_layer(path: str | Path, *, cache: str | Path, scene: str | Path, stage: StageInfo,
+def stage_shot_layer(path: str | Path, *, cache: str | Path, scene: str | Path, stage: StageInfo,
                      start: float, end: float, force: bool = False,
-                     protected: Iterable[str] = ()) -> Path:
-    """Write a layer that sublayers ``[cache, scene]``, strongest first.
+                     protected: Iterable[str] = ()) -> StagedLayer:
+    """Save a layer that sublayers ``[cache, scene]``, strongest first, under a temporary
+    name; :func:`commit_layers` renames it into place (with its cache).
 
     The cache must sit above the scene: a default value in a stronger layer would hide
     its time samples. Paths are stored relative to the shot layer when possible.
     """
     path = check_output_path(path, force=force, protected=protected)
     tmp = _temp_path(path)
-    layer = Sdf.Layer.CreateNew(str(tmp))
     try:
+        layer = Sdf.Layer.CreateNew(str(tmp))
+        if layer is None:
+            raise OutputWriteError(f"{path}: USD could not create a layer (at {tmp}); check the folder's "
+                                   "permissions and free space")
         _copy_stage_metadata(layer, stage, start, end)
         layer.subLayerPaths = [_relative(Path(cache), path), _relative(Path(scene), path)]
-        _commit(layer, tmp, path, force)
+        _save(layer, tmp, path)
+    except Tf.ErrorException as exc:
+        tmp.unlink(missing_ok=True)
+        raise _write_error(path, exc, tmp) from None
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
-    return path
+    return StagedLayer(tmp, path, force)
+
+
+def write_shot_layer(path: str | Path, *, cache: str | Path, scene: str | Path, stage: StageInfo,
+                     start: float, end: float, force: bool = False,
+                     protected: Iterable[str] = ()) -> Path:
+    """:func:`stage_shot_layer` and rename it into place (for a cache already written)."""
+    staged = stage_shot_layer(path, cache=cache, scene=scene, stage=stage, start=start, end=end, force=force,
+                              protected=protected)
+    commit_layers([staged])
+    return staged.path
 
 
 @dataclass(frozen=True)
@@ -284,8 +450,13 @@ def stitch_layers(path: str | Path, sources: Sequence[str | Path], *, provenance
         for key in ("upAxis", "metersPerUnit"):
             if first.pseudoRoot.HasInfo(key):
                 out.pseudoRoot.SetInfo(key, first.pseudoRoot.GetInfo(key))
-        for layer in layers:
+        held = 0
+        for src, layer in zip(sources, layers):
             _copy_time_samples(layer, out)
+            held += os.path.getsize(src)
+            if held >= FLUSH_BYTES and path.suffix != ".usda":  # bounded memory, as CacheLayerWriter
+                _save(out, tmp, path)
+                held = 0
         out.customLayerData = dict(provenance)
         _commit(out, tmp, path, force)
     except BaseException:
