@@ -56,7 +56,10 @@ def _row(name: str, r, ref, warmup: int, edges, rest) -> dict:
         d = np.linalg.norm(x - ref.positions[warmup:], axis=-1) * 1e3
         row.update(mean_mm=float(d.mean()), p95_mm=float(np.percentile(d, 95)))
     row["penetration"] = float(np.mean(r.penetration[warmup:]))
-    row["stretch_p99"] = float(np.median([np.percentile(edge_stretch(f, rest, edges), 99) for f in x]))
+    rest_len = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1)
+    ratio = np.linalg.norm(x[:, edges[:, 1]] - x[:, edges[:, 0]], axis=2) / np.maximum(rest_len, 1e-12)
+    row["stretch_p99"] = float(np.median(np.percentile(ratio, 99, axis=1)))  # the median frame's
+    row["stretch_max"] = float(edge_stretch(x, rest, edges).max())
     return row
 
 
@@ -94,6 +97,7 @@ def main(argv=None) -> int:
         cfg = dataclasses.replace(base, **SETTINGS[name])
         t0 = time.perf_counter()
         r = simulate(body, betas, rest, faces, poses, transl, cfg)
+        np.save(out / f"positions_{len(rows)}.npy", r.positions)  # a later failure keeps the runs done
         row = _row(name, r, ref, warmup, edges, rest)
         row["wall_s"] = time.perf_counter() - t0
         rows.append(row)
@@ -122,12 +126,13 @@ def main(argv=None) -> int:
     default = next((r for r in rows if r["setting"] == DEFAULT), None)
     lines = [f"{verts.shape[0]}-vertex T-shirt, {args.bvh} from {args.start:g} s, {len(poses) - warmup} evaluated "
              "frames at 30 fps; error against the first row", "",
-             "| setting | mean mm | p95 mm | inside body | stretch p99 | s/frame | time / default |",
+             "| setting | mean mm | p95 mm | inside body | stretch p99 / max | s/frame | time / default |",
              "|---|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         ratio = r["s_per_frame"] / default["s_per_frame"] if default else float("nan")
         lines.append(f"| {r['setting']} | {r.get('mean_mm', 0.0):.2f} | {r.get('p95_mm', 0.0):.2f} | "
-                     f"{100 * r['penetration']:.2f}% | {r['stretch_p99']:.3f} | {r['s_per_frame']:.2f} | {ratio:.2f} |")
+                     f"{100 * r['penetration']:.2f}% | {r['stretch_p99']:.3f} / {r['stretch_max']:.2f} | "
+                     f"{r['s_per_frame']:.2f} | {ratio:.2f} |")
     if floor:
         lines += ["", "Per-frame error floor (the moving garment against the same pose held "
                   f"{args.hold} frames):", "", "| frame | mean mm | p95 mm | last held step mm |", "|---:|---:|---:|---:|"]

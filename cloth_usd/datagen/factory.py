@@ -74,8 +74,9 @@ class FactoryConfig:
     test_body_shirts: int | None = None
     """Training shirts worn by each test body (the first ones); None: all of them."""
     simulate_splits: tuple[str, ...] | None = None
-    """Simulate only the sequences of these splits (a test set: ``["test_motion"]``); every
-    pair is still draped, so the fit attribute is fitted on the training pairs. None: all."""
+    """Simulate only the sequences of these splits (a test set: ``["test_motion"]``); the fit
+    attribute is still fitted on the training pairs, as planned (undraped) where they are not
+    simulated. None: all."""
     floor: dict | None = None
     """The per-frame error floor (a :class:`FloorSpec`'s fields): for some of the sequences
     to be simulated, a few of their frames' poses held until the cloth settles, each its own
@@ -305,16 +306,21 @@ def drape_pairs(jobs: list[Job], out_dir: str | Path, sim: dict, *, workers: int
 
 
 def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1) -> Manifest:
-    """Plan, drape every pair, simulate (in ``workers`` processes), merge manifests, fit
-    alpha. Resumable."""
+    """Plan, drape every pair to be simulated, simulate (in ``workers`` processes), merge
+    manifests, fit alpha. Resumable."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     body = load_body_model()
     planned = plan_jobs(config, body)
     log.info("%d sequences planned", len(planned))
-    jobs, drape_failed = drape_pairs(planned, out, config.sim, workers=workers)
-    wanted = [j for j in jobs if config.simulate_splits is None
-              or j.meta["split"] in (*config.simulate_splits, FLOOR_SPLIT)]
+    simulated = [j for j in planned if config.simulate_splits is None
+                 or j.meta["split"] in (*config.simulate_splits, FLOOR_SPLIT)]
+    wanted, drape_failed = drape_pairs(simulated, out, config.sim, workers=workers)
+    # The fit attribute is fitted on the training pairs: draped where they are simulated, as
+    # planned where simulate_splits leaves them out (a test set is never trained on).
+    draped = {_pair(j): j.garment_vertices for j in wanted}
+    jobs = [dataclasses.replace(j, garment_vertices=draped[_pair(j)]) if _pair(j) in draped else j
+            for j in planned if _pair(j) not in drape_failed]
     workers = max(1, min(workers, len(wanted)))
     names = [f"manifest.worker-{k}.json" for k in range(workers)]
     parts = [(wanted[k::workers], out, config.sim, config.dataset, names[k]) for k in range(workers)]

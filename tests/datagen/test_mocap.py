@@ -107,8 +107,8 @@ def test_simulate_splits_are_checked(tmp_path):
 
 
 def test_a_test_set_of_real_clips_leaves_the_warm_up_out(tmp_path, monkeypatch):
-    """simulate_splits simulates only the test sequences (all pairs draped for the fit), and
-    loading the data set drops each sequence's warm-up frames."""
+    """simulate_splits simulates and drapes only the test sequences (the fit is fitted on the
+    planned training pairs), and loading the data set drops each sequence's warm-up frames."""
     import sys
     from functools import partial
 
@@ -122,10 +122,13 @@ def test_a_test_set_of_real_clips_leaves_the_warm_up_out(tmp_path, monkeypatch):
     path = _config(tmp_path, simulate_splits=["test_motion"])
     monkeypatch.setattr(factory, "run_jobs", partial(dataset.run_jobs, simulator=fake_simulate))
     monkeypatch.setattr(dataset, "engine_versions", lambda: {"simulator": "fake_simulate"})
-    monkeypatch.setattr(factory, "drape_pairs", lambda jobs, *args, **kwargs: (list(jobs), {}))
+    asked: list[str] = []
+    monkeypatch.setattr(factory, "drape_pairs", lambda jobs, *args, **kwargs: (
+        asked.extend(j.meta["split"] for j in jobs) or list(jobs), {}))
     out = tmp_path / "data"
     manifest = factory.run_factory(load_config(path, mocap_dir=MOCAP), out)
     assert manifest.accepted and {e["split"] for e in manifest.sequences.values()} == {"test_motion"}
+    assert set(asked) == {"test_motion"}  # nothing else is draped
     assert (out / "fit.npz").is_file()  # fitted on the training pairs, which were never simulated
     data = load_dataset(out)
     for clip in data.clips:
