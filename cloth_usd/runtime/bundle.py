@@ -35,7 +35,7 @@ from ..errors import ArgumentError, BundleError, ClothUsdError
 from .io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT
 from .session import ModelSession
 
-__all__ = ["FORMAT_VERSION", "MANIFEST", "ModelBundle", "load_bundle", "find_bundle", "write_bundle",
+__all__ = ["FORMAT_VERSION", "MANIFEST", "DEFAULTS", "ModelBundle", "load_bundle", "find_bundle", "write_bundle",
            "default_bundle_dir"]
 
 log = logging.getLogger(__name__)
@@ -189,10 +189,28 @@ def load_bundle(path: str | Path) -> ModelBundle:
                        coarse_base=CoarseBase(base), heading=Heading(heading))
 
 
-def _candidates(folder: Path) -> list[Path]:
+#: In a folder of bundles: ``{"<category>": "<bundle folder>"}``, the bundle tried first for a
+#: category (the default); the others follow in name order.
+DEFAULTS = "defaults.json"
+
+
+def _candidates(folder: Path, category: Category) -> list[Path]:
     if (folder / MANIFEST).is_file():
         return [folder]
-    return sorted(p for p in folder.iterdir() if (p / MANIFEST).is_file())
+    found = sorted(p for p in folder.iterdir() if (p / MANIFEST).is_file())
+    defaults = folder / DEFAULTS
+    if defaults.is_file():
+        try:
+            chosen = json.loads(defaults.read_bytes()).get(category.value)
+        except (OSError, ValueError, AttributeError) as exc:
+            raise BundleError(f"{defaults}: unreadable ({exc}); expected {{\"<category>\": \"<bundle folder>\"}}") from exc
+        if chosen is not None:
+            first = folder / str(chosen)
+            if first not in found:
+                raise BundleError(f"{defaults}: the default {category.value} bundle {chosen!r} is not a bundle folder "
+                                  f"in {folder}")
+            found = [first] + [p for p in found if p != first]
+    return found
 
 
 def _category_of(bundle: Path) -> str | None:
@@ -213,7 +231,9 @@ def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | No
     Args:
         category: garment category.
         search_dirs: folders that are bundles or hold bundle folders (``--models DIR``);
-            None for :func:`default_bundle_dir`. Bundles are tried in name order.
+            None for :func:`default_bundle_dir`. In a folder, the bundle its
+            :data:`DEFAULTS` file names for the category is tried first, then the others in
+            name order.
     Raises:
         ArgumentError: a given search folder does not exist.
         BundleError: the matching bundle fails verification, or none matches and a
@@ -228,7 +248,7 @@ def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | No
             if given:
                 raise ArgumentError(f"--models {d}: no such folder")
             continue
-        for candidate in _candidates(d):
+        for candidate in _candidates(d, category):
             try:
                 found = _category_of(candidate)
             except BundleError as exc:  # it may be another category's: an error only if none is found

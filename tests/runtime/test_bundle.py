@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -69,6 +70,21 @@ def test_find_bundle_by_category(tmp_path, fake_exported):
         find_bundle("tshirt", [tmp_path / "nope"])
 
 
+def test_a_folders_defaults_file_picks_the_bundle_tried_first(tmp_path, fake_exported):
+    models = tmp_path / "models"
+    write_tiny_bundle(models / "a-old", fake_exported, name="old")
+    write_tiny_bundle(models / "b-new", fake_exported, name="new")
+    assert find_bundle("tshirt", [models]).name == "old"  # name order without a defaults file
+    (models / "defaults.json").write_text('{"tshirt": "b-new"}')
+    assert find_bundle("tshirt", [models]).name == "new"
+    (models / "defaults.json").write_text('{"tshirt": "gone"}')
+    with pytest.raises(BundleError, match=r"defaults.json: the default tshirt bundle 'gone' is not a bundle folder"):
+        find_bundle("tshirt", [models])
+    (models / "defaults.json").write_text('{"tshirt": ')
+    with pytest.raises(BundleError, match=r"defaults.json: unreadable"):
+        find_bundle("tshirt", [models])
+
+
 def test_tampered_file_names_the_file(tmp_path, fake_exported):
     folder = write_tiny_bundle(tmp_path / "b", fake_exported)
     data = bytearray((folder / "coarse.onnx").read_bytes())
@@ -120,15 +136,32 @@ def test_make_bundle_script(tmp_path, fake_exported, capsys):
 
 
 def test_the_shipped_tshirt_bundle_verifies_and_records_its_evaluation():
+    """The default T-shirt bundle (models/bundles/defaults.json) travels with the evaluation the
+    README quotes, measured on its own ONNX files, and lost no frame to the guard on the
+    held-out real clips it records (issue #12)."""
     from cloth_usd.runtime.bundle import default_bundle_dir, find_bundle
 
     bundle = find_bundle("tshirt")
-    assert bundle is not None and bundle.path.parent == default_bundle_dir()
-    metrics = json.loads((bundle.path / "manifest.json").read_text())["metrics"]
-    assert metrics  # the evaluation the README quotes travels with the models
-    evaluation = metrics["evaluation"]
-    assert evaluation["same_models"] is True  # measured on these very ONNX files
-    for row in evaluation["rows"]:  # issue #4: detail < coarse < skinning on every test set
+    assert bundle is not None and bundle.path.parent == default_bundle_dir() and bundle.name == "tshirt-v4"
+    assert bundle.heading.value == "canonical"
+    evaluation = json.loads((bundle.path / "manifest.json").read_text())["metrics"]["evaluation"]
+    assert evaluation["same_models"] is True and evaluation["rows"]  # measured on these very ONNX files
+    for row in evaluation["rows"]:  # against Newton on real motion: both learned tiers below skinning
+        mean = row["mean_mm"]
+        assert max(mean["coarse"], mean["detail"]) < mean["skinning"], row["title"]
+    clips = [r for r in evaluation["held_out_clips"] if r["bundle"] == bundle.name]
+    assert len({r["clip"] for r in clips}) >= 5 and {r["tier"] for r in clips} == {"coarse", "detail"}
+    for row in clips:
+        assert row["fallback_coarse"] == row["fallback_skinning"] == 0, (row["clip"], row["tier"])
+
+
+def test_tshirt_v3_keeps_its_ordered_evaluation():
+    """The supervised bundle before it: detail < coarse < skinning on every row of its own test
+    sets (issue #4), measured on its own ONNX files."""
+    bundle = load_bundle(Path(__file__).resolve().parents[2] / "models" / "bundles" / "tshirt-v3")
+    evaluation = json.loads((bundle.path / "manifest.json").read_text())["metrics"]["evaluation"]
+    assert evaluation["same_models"] is True
+    for row in evaluation["rows"]:
         mean = row["mean_mm"]
         assert mean["detail"] < mean["coarse"] < mean["skinning"], row["title"]
 

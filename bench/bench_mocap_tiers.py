@@ -1,0 +1,176 @@
+"""Benchmark (not a test): every tier of some bundles on held-out real clips, as a user bakes them (issue #12).
+
+For each BVH clip (``--clip FILE[:A:B]``, file frames A..B, under ``--mocap``): the clip is
+brought in with ``cloth-usd import-motion`` wearing the sample's T-shirt, and baked with
+``cloth-usd bake`` in the skinning tier and, for every ``--bundle``, in the coarse and the
+detail tier. Per bake, over every frame of the clip:
+
+- guard: frames the run-time guard replaced by the next safer tier (coarse, skinning);
+- edge stretch: each frame's 99th percentile and maximum of edge length over the rest
+  shirt's, then the median frame's p99 (p50 col.), the worst frame's p99 and the largest
+  edge of all; the same against the skinned shirt of that frame (skinning stretches too);
+- offset: the largest vertex distance from the skinned shirt [mm];
+- penetration: the post-process's count of vertices it pushed out (per frame, before), and
+  the fraction of vertices inside the posed body after it (the full SMPL mesh);
+- bending: the dihedral bending energy of the material (``nn.physics``; needs torch) [J].
+
+Writes ``OUT/mocap_tiers.md`` (also printed) and ``OUT/mocap_tiers.json``.
+
+Run: python bench/bench_mocap_tiers.py --mocap DIR --clip cmu-mb.../05/05_02.bvh:120:400
+         [--clip ...] [--bundle models/bundles/tshirt-v3 ...] [--out out/mocap_tiers]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+from pxr import Sdf, Usd, UsdGeom
+
+from cloth_usd.core.body import load_body_model, posed_vertices, shape_body
+from cloth_usd.datagen.simulate import penetration_fraction, unique_edges
+
+ROOT = Path(__file__).resolve().parents[1]
+SAMPLE = ROOT / "samples" / "walk_tshirt" / "scene.usda"
+CLI = [sys.executable, "-m", "cloth_usd.cli"]
+
+
+def _run(*args: str) -> str:
+    done = subprocess.run([*CLI, *args], capture_output=True, text=True)
+    if done.returncode:
+        raise SystemExit(f"cloth-usd {' '.join(args)} failed:\n{done.stderr}")
+    return done.stdout
+
+
+def _points(cache: Path) -> tuple[np.ndarray, np.ndarray, dict]:
+    """(T, N, 3) points and their time codes as the cache layer holds them, and its provenance."""
+    layer = Sdf.Layer.FindOrOpen(str(cache))
+    found: list[Sdf.Path] = []
+    layer.Traverse(Sdf.Path.absoluteRootPath, lambda p: found.append(p) if p.name == "points" else None)
+    attr = layer.GetAttributeAtPath(found[0])
+    times = np.array(sorted(layer.ListTimeSamplesForPath(attr.path)))
+    pts = np.stack([np.asarray(layer.QueryTimeSample(attr.path, t), dtype=np.float64) for t in times])
+    return pts, times, dict(layer.customLayerData)
+
+
+def _stretch(points: np.ndarray, ref: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """(T, E) edge length over the reference's (ref (N, 3) or (T, N, 3))."""
+    length = np.linalg.norm(points[:, edges[:, 1]] - points[:, edges[:, 0]], axis=-1)
+    ref = ref if ref.ndim == 3 else ref[None]
+    ref_len = np.linalg.norm(ref[:, edges[:, 1]] - ref[:, edges[:, 0]], axis=-1)
+    return length / np.maximum(ref_len, 1e-4)
+
+
+def _garment_report(provenance: dict) -> dict:
+    """The first garment's record of a cache's provenance (``customLayerData["cloth_usd"]``)."""
+    garments = dict(provenance.get("cloth_usd", {}).get("garments", {}))
+    return dict(next(iter(garments.values()))) if garments else {}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--mocap", required=True, help="the mocap folder")
+    ap.add_argument("--clip", action="append", required=True, help="FILE[:A:B] under --mocap (file frames A..B)")
+    ap.add_argument("--bundle", action="append", help="bundle folder (repeatable; default the shipped one)")
+    ap.add_argument("--out", default="out/mocap_tiers")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    bundles = args.bundle or [str(ROOT / "models" / "bundles" / "tshirt-v3")]
+    body = load_body_model()
+    rest_stage = Usd.Stage.Open(str(SAMPLE))
+    rest_prim = next(p for p in rest_stage.Traverse() if p.IsA(UsdGeom.Mesh) and p.HasAttribute("cloth:category"))
+    mesh = UsdGeom.Mesh(rest_prim)
+    rest = np.asarray(mesh.GetPointsAttr().Get(), dtype=np.float64)
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get())
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get())
+    faces = np.concatenate([[indices[s], indices[s + k], indices[s + k + 1]] for s, c in
+                            zip(np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) for k in range(1, c - 1)])
+    faces = faces.reshape(-1, 3)
+    edges = unique_edges(faces)
+    energy = _bending(rest, faces)
+    rows = []
+    for clip in args.clip:
+        name, *frames = clip.split(":")
+        label = Path(name).stem
+        shot = out / f"{label}.usda"
+        extra = ["--frames", f"{frames[0]}:{frames[1]}"] if frames else []
+        _run("import-motion", str(Path(args.mocap) / name), "-o", str(shot), "--garment", str(SAMPLE), "--force",
+             *extra)
+        skin_cache = out / f"{label}.skinning.usdc"
+        _run("bake", str(shot), "-o", str(skin_cache), "--tier", "skinning", "--force")
+        skinned, times, _ = _points(skin_cache)
+        poses = _stage_poses(shot, times)
+        bodies = posed_vertices(body, poses["betas"], poses["poses"], poses["transl"])
+        runs = [("skinning", None, skin_cache)]
+        for bundle in bundles:
+            for tier in ("coarse", "detail"):
+                cache = out / f"{label}.{Path(bundle).name}.{tier}.usdc"
+                _run("bake", str(shot), "-o", str(cache), "--tier", tier, "--models", bundle, "--force")
+                runs.append((tier, Path(bundle).name, cache))
+        for tier, bundle, cache in runs:
+            pts, _, prov = _points(cache)
+            report = _garment_report(prov)
+            vs_rest, vs_skin = _stretch(pts, rest, edges), _stretch(pts, skinned, edges)
+            p99_rest, p99_skin = np.percentile(vs_rest, 99, axis=1), np.percentile(vs_skin, 99, axis=1)
+            inside = [penetration_fraction(pts[t], bodies[t], body.faces) for t in range(0, len(times), 5)]
+            row = {"clip": label, "frames": len(times), "bundle": bundle or "-", "tier": tier,
+                   "fallback_coarse": int(report.get("fallback_coarse", 0)),
+                   "fallback_skinning": int(report.get("fallback_skinning", 0)),
+                   "stretch_rest_p99_median": float(np.median(p99_rest)), "stretch_rest_p99_worst": float(p99_rest.max()),
+                   "stretch_rest_max": float(vs_rest.max()),
+                   "stretch_skin_p99_median": float(np.median(p99_skin)), "stretch_skin_p99_worst": float(p99_skin.max()),
+                   "stretch_skin_max": float(vs_skin.max()),
+                   "offset_max_mm": float(np.linalg.norm(pts - skinned, axis=-1).max() * 1e3),
+                   "postprocess_moved_per_frame": float(report.get("postprocess_moved", 0)) / max(len(times), 1),
+                   "inside_after": float(np.mean(inside)),
+                   "bending_j": float(np.mean([energy(p) for p in pts[::5]])) if energy else float("nan")}
+            rows.append(row)
+            print(json.dumps(row), flush=True)
+    (out / "mocap_tiers.json").write_text(json.dumps(rows, indent=1))
+    lines = ["| clip | frames | bundle | tier | guard: coarse / skinning | stretch vs rest p99 median / worst, max "
+             "| vs skinning p99 median / worst, max | offset max mm | post-process moved / frame | inside after | "
+             "bending J |", "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['clip']} | {r['frames']} | {r['bundle']} | {r['tier']} | {r['fallback_coarse']} / "
+                     f"{r['fallback_skinning']} | {r['stretch_rest_p99_median']:.2f} / {r['stretch_rest_p99_worst']:.2f}, "
+                     f"{r['stretch_rest_max']:.2f} | {r['stretch_skin_p99_median']:.2f} / "
+                     f"{r['stretch_skin_p99_worst']:.2f}, {r['stretch_skin_max']:.2f} | {r['offset_max_mm']:.0f} | "
+                     f"{r['postprocess_moved_per_frame']:.0f} | {100 * r['inside_after']:.2f}% | {r['bending_j']:.2e} |")
+    text = "\n".join(lines) + "\n"
+    (out / "mocap_tiers.md").write_text(text)
+    print(text)
+    return 0
+
+
+def _stage_poses(shot: Path, times: np.ndarray) -> dict:
+    """The shot's SMPL poses, root translations and betas at ``times``, read as the baker reads them."""
+    from cloth_usd.usd.read import open_stage, read_motion, read_scene
+
+    stage = open_stage(shot)
+    character = read_scene(stage).characters[0]
+    motion = read_motion(stage, character, times)
+    root = shape_body(load_body_model(), character.betas)[1][0]
+    return {"poses": motion.poses, "transl": motion.root_position - root, "betas": character.betas}
+
+
+def _bending(rest: np.ndarray, faces: np.ndarray):
+    """points (N, 3) -> the material's bending energy [J], or None without torch."""
+    try:
+        import torch
+
+        from cloth_usd.datagen.simulate import SimConfig
+        from cloth_usd.nn.physics import Material, bending_energy, garment_rest
+    except ImportError:
+        return None
+    material = Material.from_sim_config(SimConfig())
+    state = garment_rest(rest, faces, material, dtype=torch.float64)
+    return lambda p: float(bending_energy(torch.as_tensor(p[None]), state, material).sum())
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
