@@ -48,3 +48,22 @@ def read_config(path: str | Path, what: str, *, text: str | None = None) -> Any:
     except (ValueError, tomllib.TOMLDecodeError) as exc:
         raise ArgumentError(f"{path}: not valid {path.suffix[1:].upper() if path.suffix == '.toml' else 'JSON'} "
                             f"({exc})") from None
+
+
+def check_keys(raw: Any, cls: type, where: str) -> dict:
+    """``raw`` as the keyword arguments of the dataclass ``cls``, checked: a table (dict) whose
+    keys are all fields of ``cls``.
+
+    Raises:
+        ArgumentError: naming ``where``, the unknown keys and the valid ones.
+    """
+    import dataclasses
+
+    known = [f.name for f in dataclasses.fields(cls)]
+    if not isinstance(raw, dict):
+        raise ArgumentError(f"{where}: expected a table of {cls.__name__} keys ({', '.join(known)}), "
+                            f"got {type(raw).__name__}")
+    unknown = sorted(set(raw) - set(known))
+    if unknown:
+        raise ArgumentError(f"{where}: unknown keys {unknown} (valid: {', '.join(known)})")
+    return dict(raw)

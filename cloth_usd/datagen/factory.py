@@ -22,7 +22,7 @@ import numpy as np
 
 from ..core.association import associate
 from ..core.body import load_body_model, shape_body
-from ..core.files import read_config
+from ..core.files import check_keys, read_config
 from ..core.fit import FitModel, common_anchors, fit_factor_analysis, pair_distances
 from ..errors import ArgumentError
 from .bodies import body_shapes
@@ -96,13 +96,7 @@ def load_config(path: str | Path, *, mocap_dir: str | Path | None = None) -> Fac
             names one, ``$CLOTH_USD_MOCAP``).
     """
     path = Path(path)
-    raw = read_config(path, "the data set config")
-    if not isinstance(raw, dict):
-        raise ArgumentError(f"{path}: expected a table of FactoryConfig keys")
-    known = {f.name for f in dataclasses.fields(FactoryConfig)}
-    unknown = sorted(set(raw) - known)
-    if unknown:
-        raise ArgumentError(f"{path}: unknown keys {unknown} (valid: {', '.join(sorted(known))})")
+    raw = check_keys(read_config(path, "the data set config"), FactoryConfig, str(path))
     for key in ("test_shirts", "bodies", "test_bodies", "train_motions", "test_motions", "simulate_splits"):
         if key in raw:
             raw[key] = tuple(raw[key])

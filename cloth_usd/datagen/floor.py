@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..core.files import check_keys
 from ..core.shards import DatasetError, Manifest, read_shard
 from ..errors import ArgumentError
 from .dataset import Job
@@ -53,12 +54,7 @@ class FloorSpec:
     @classmethod
     def from_mapping(cls, raw) -> FloorSpec:
         """From the config's ``floor`` table; unknown keys are an error naming them."""
-        if not isinstance(raw, dict):
-            raise ArgumentError(f"floor: expected a table of {', '.join(f.name for f in dataclasses.fields(cls))}")
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(raw) - known)
-        if unknown:
-            raise ArgumentError(f"floor: unknown keys {unknown} (valid: {', '.join(sorted(known))})")
+        raw = check_keys(raw, cls, "floor")
         return cls(**raw)
 
 

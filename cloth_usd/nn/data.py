@@ -247,15 +247,17 @@ def even_frames(num_frames: int, count: int | None) -> np.ndarray:
     return np.unique(np.linspace(0, num_frames - 1, count).round().astype(np.int64))
 
 
-def plan_batches(clips: Sequence[Clip], batch: int, rng: np.random.Generator | None = None, *,
-                 frames: int | None = None) -> list[tuple[int, np.ndarray]]:
+def plan_batches(clips: Sequence, batch: int, rng: np.random.Generator | None = None, *,
+                 frames: int | None = None, first: Sequence[int] | None = None) -> list[tuple[int, np.ndarray]]:
     """Batches of frames, each from one clip (a batch shares one garment graph).
 
     Args:
-        clips: the clips.
+        clips: the clips (anything with ``num_frames``).
         batch: frames per batch (B).
         rng: shuffles the frames of every clip and the batch order; None keeps both in order.
         frames: use only this many evenly spread frames per clip (all when None).
+        first: per clip, its first frame to plan (the ones before are never used; a clip
+            with none left gives no batch); None: every frame.
     Returns:
         ``[(clip index, frames (B',) int64), ...]``, B' <= B.
     """
@@ -263,7 +265,10 @@ def plan_batches(clips: Sequence[Clip], batch: int, rng: np.random.Generator | N
         raise ArgumentError(f"batch must be >= 1 frame, got {batch}")
     out = []
     for k, clip in enumerate(clips):
-        idx = even_frames(clip.num_frames, frames)
+        start = 0 if first is None else int(first[k])
+        if first is not None and clip.num_frames <= start:
+            continue
+        idx = start + even_frames(clip.num_frames - start, frames)
         if rng is not None:
             idx = rng.permutation(idx)
         out += [(k, idx[lo:lo + batch]) for lo in range(0, idx.shape[0], batch)]

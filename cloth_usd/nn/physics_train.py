@@ -128,13 +128,9 @@ class PhysicsOptions:
     @classmethod
     def from_mapping(cls, raw, source: str = "physics") -> PhysicsOptions:
         """Build from a mapping; unknown keys are an error that names them and the valid ones."""
-        if not isinstance(raw, dict):
-            raise ArgumentError(f"{source}: expected a table of PhysicsOptions keys, got {type(raw).__name__}")
-        known = [f.name for f in dataclasses.fields(cls)]
-        unknown = sorted(set(raw) - set(known))
-        if unknown:
-            raise ArgumentError(f"{source}: unknown keys {unknown} (valid: {', '.join(known)})")
-        return cls(**raw)
+        from ..core.files import check_keys
+
+        return cls(**check_keys(raw, cls, source))
 
 
 def load_physics_config(path: str | Path | None, **overrides) -> tuple[TrainConfig, PhysicsOptions]:
@@ -374,19 +370,8 @@ def window_batches(clips: Sequence[PhysicsClip], batch: int, rng: np.random.Gene
         raise ArgumentError(f"batch must be >= 1 window, got {batch}")
     if not window or max(window) != 0:
         raise ArgumentError(f"window: offsets from t ending at 0, got {tuple(window)}")
-    first_offset = -min(window)
-    out = []
-    for k, clip in enumerate(clips):
-        first = max(first_offset, int(clip.meta.get("warmup_frames", 0)))
-        if clip.num_frames <= first:
-            continue
-        t = first + even_frames(clip.num_frames - first, frames)
-        if rng is not None:
-            t = rng.permutation(t)
-        out += [(k, t[lo:lo + batch]) for lo in range(0, t.shape[0], batch)]
-    if rng is not None:
-        out = [out[i] for i in rng.permutation(len(out))]
-    return out
+    first = [max(-min(window), int(clip.meta.get("warmup_frames", 0))) for clip in clips]
+    return plan_batches(clips, batch, rng, frames=frames, first=first)
 
 
 @dataclass(frozen=True)
