@@ -29,10 +29,11 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from pxr import Sdf, Usd, UsdGeom
+from pxr import Sdf
 
 from cloth_usd.core.body import load_body_model, posed_vertices, shape_body
 from cloth_usd.datagen.simulate import penetration_fraction, unique_edges
+from cloth_usd.usd.read import open_stage, read_motion, read_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "samples" / "walk_tshirt" / "scene.usda"
@@ -82,15 +83,8 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     bundles = args.bundle or [str(ROOT / "models" / "bundles" / "tshirt-v3")]
     body = load_body_model()
-    rest_stage = Usd.Stage.Open(str(SAMPLE))
-    rest_prim = next(p for p in rest_stage.Traverse() if p.IsA(UsdGeom.Mesh) and p.HasAttribute("cloth:category"))
-    mesh = UsdGeom.Mesh(rest_prim)
-    rest = np.asarray(mesh.GetPointsAttr().Get(), dtype=np.float64)
-    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get())
-    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get())
-    faces = np.concatenate([[indices[s], indices[s + k], indices[s + k + 1]] for s, c in
-                            zip(np.concatenate([[0], np.cumsum(counts)[:-1]]), counts) for k in range(1, c - 1)])
-    faces = faces.reshape(-1, 3)
+    garment = read_scene(open_stage(SAMPLE)).garments[0]  # the sample's shirt, as the baker reads it
+    rest, faces = garment.rest_points, garment.triangles
     edges = unique_edges(faces)
     energy = _bending(rest, faces)
     rows = []
@@ -149,8 +143,6 @@ def main(argv=None) -> int:
 
 def _stage_poses(shot: Path, times: np.ndarray) -> dict:
     """The shot's SMPL poses, root translations and betas at ``times``, read as the baker reads them."""
-    from cloth_usd.usd.read import open_stage, read_motion, read_scene
-
     stage = open_stage(shot)
     character = read_scene(stage).characters[0]
     motion = read_motion(stage, character, times)

@@ -26,7 +26,7 @@ from ..core.shards import DatasetError, Manifest, read_shard
 from ..errors import ArgumentError
 from .dataset import Job
 
-__all__ = ["FLOOR_SPLIT", "FloorSpec", "floor_jobs", "floor_report"]
+__all__ = ["FLOOR_SPLIT", "FloorSpec", "held_frames", "held_motion", "floor_jobs", "floor_report"]
 
 #: The split of the held-pose sequences (never trained or evaluated on).
 FLOOR_SPLIT = "floor"
@@ -66,6 +66,17 @@ def held_frames(num_frames: int, warmup: int, count: int) -> list[int]:
     return sorted({int(round(k)) for k in picks})
 
 
+def held_motion(poses: np.ndarray, transl: np.ndarray, frame: int, hold: int) -> tuple[np.ndarray, np.ndarray]:
+    """The motion up to ``frame``, then that frame's pose and root repeated ``hold`` times.
+
+    Returns:
+        ``(poses (frame + 1 + hold, 72), transl (frame + 1 + hold, 3))``.
+    """
+    k = int(frame)
+    return (np.concatenate([poses[:k + 1], np.repeat(poses[k:k + 1], hold, axis=0)]),
+            np.concatenate([transl[:k + 1], np.repeat(transl[k:k + 1], hold, axis=0)]))
+
+
 def floor_jobs(jobs: list[Job], spec: FloorSpec) -> list[Job]:
     """The held-pose jobs of ``spec.sequences`` of ``jobs``, spread evenly over the list.
 
@@ -81,8 +92,7 @@ def floor_jobs(jobs: list[Job], spec: FloorSpec) -> list[Job]:
         hold = max(1, int(round(spec.hold_seconds * fps)))
         t = job.poses.shape[0]
         for k in held_frames(t, int(job.meta.get("warmup_frames", 0)), spec.frames):
-            poses = np.concatenate([job.poses[:k + 1], np.repeat(job.poses[k:k + 1], hold, axis=0)])
-            transl = np.concatenate([job.transl[:k + 1], np.repeat(job.transl[k:k + 1], hold, axis=0)])
+            poses, transl = held_motion(job.poses, job.transl, k, hold)
             meta = {**job.meta, "split": FLOOR_SPLIT, "floor_of": job.name, "frame": k, "hold_frames": hold}
             meta.pop("warmup_frames", None)
             out.append(dataclasses.replace(job, name=f"floor.{job.name}.f{k}", poses=poses, transl=transl,

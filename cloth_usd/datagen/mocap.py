@@ -31,6 +31,7 @@ from scipy.spatial.transform import Rotation
 from ..core.heading import root_yaw, yaw_matrices
 from ..errors import ArgumentError, MotionFileError
 from .bvh import BVH_RIGS, read_bvh, retarget_bvh, rig_mapping, synthetic_first_frame, trim_bvh
+from .motion import blend_from_rest
 
 __all__ = ["MocapSpec", "MocapMotion", "mocap_motion"]
 
@@ -127,7 +128,7 @@ def mocap_motion(spec: MocapSpec, mocap_dir: str | Path, *, smpl_joints: np.ndar
     ramp = int(round(spec.ramp_seconds * spec.fps))
     root = _ramp_root(root, ramp)
     ease = int(round(spec.ease_seconds * spec.fps))
-    lead = _ease_to(poses[0], ease)
+    lead = blend_from_rest(np.repeat(poses[:1], ease, axis=0), ease)  # rest -> the clip's first pose
     poses = np.concatenate([lead, poses])
     transl = np.concatenate([np.zeros((ease, 3)), root])
     source = {"bvh": spec.bvh, "sha256": hashlib.sha256(path.read_bytes()).hexdigest(), "rig": rig,
@@ -151,11 +152,3 @@ def _ramp_root(root: np.ndarray, frames: int) -> np.ndarray:
     k = np.arange(1, len(root))
     scale = np.where(k < frames, 0.5 - 0.5 * np.cos(np.pi * k / frames), 1.0)
     return np.concatenate([root[:1], root[:1] + np.cumsum(step * scale[:, None], axis=0)])
-
-
-def _ease_to(pose: np.ndarray, frames: int) -> np.ndarray:
-    """(frames, 72) from the rest pose toward ``pose`` (72,), a smooth step: frame 0 is the rest
-    pose, the clip's first frame follows the last one."""
-    s = 0.5 - 0.5 * np.cos(np.pi * np.arange(frames) / frames)
-    rot = Rotation.from_rotvec(pose.reshape(24, 3)).as_rotvec()  # the shortest rotation vector per joint
-    return (s[:, None, None] * rot[None]).reshape(frames, 72)

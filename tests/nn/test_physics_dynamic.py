@@ -10,7 +10,7 @@ import pytest
 
 torch = pytest.importorskip("torch", reason="training needs torch (pip install 'cloth-usd[train]')")
 
-from train_data import TINY  # noqa: E402
+from train_data import TINY, one_thread  # noqa: E402,F401 (one_thread: an autouse fixture)
 
 from cloth_usd.core.pipeline import CoarseBase  # noqa: E402
 from cloth_usd.core.scene import Tier  # noqa: E402
@@ -24,14 +24,6 @@ from cloth_usd.nn.train import TrainConfig, _Tensors, load_run  # noqa: E402
 
 DYNAMIC = PhysicsOptions(dynamic=True)
 STATIC = PhysicsOptions()
-
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 # --------------------------------------------------------------------------- options

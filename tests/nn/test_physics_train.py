@@ -9,7 +9,7 @@ import pytest
 
 torch = pytest.importorskip("torch", reason="training needs torch (pip install 'cloth-usd[train]')")
 
-from train_data import TINY  # noqa: E402
+from train_data import TINY, one_thread  # noqa: E402,F401 (one_thread: an autouse fixture)
 
 from cloth_usd.core.heading import Heading, root_yaw  # noqa: E402
 from cloth_usd.core.pipeline import CoarseBase  # noqa: E402
@@ -22,14 +22,6 @@ from cloth_usd.nn.train import Objective, TrainConfig, _Tensors, build_model, lo
 pytestmark = pytest.mark.slow
 PHYSICS = TrainConfig(objective="physics", coarse_base="skinned", width=0.0625, epochs=2, batch=3, max_batches=2,
                       stat_frames=3, bending_scale=10.0, lr=2e-3)
-
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 @pytest.fixture(scope="module")

@@ -10,7 +10,7 @@ import pytest
 
 torch = pytest.importorskip("torch", reason="training needs torch (pip install 'cloth-usd[train]')")
 
-from train_data import TINY_TRAIN, tiny_dataset, tiny_runs, tiny_trained_bundle  # noqa: E402
+from train_data import TINY_TRAIN, one_thread, tiny_dataset, tiny_runs, tiny_trained_bundle  # noqa: E402,F401
 
 from cloth_usd.core.pipeline import run_tiers  # noqa: E402
 from cloth_usd.core.scene import Tier  # noqa: E402
@@ -42,15 +42,6 @@ from cloth_usd.nn.train import (  # noqa: E402
 
 pytestmark = pytest.mark.slow
 QUICK = TrainConfig(**TINY_TRAIN)
-
-
-@pytest.fixture(scope="module", autouse=True)
-def one_thread():
-    """Two torch threads on a loaded 2-core machine spin-wait: 10-50x slower steps."""
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)
-    yield
-    torch.set_num_threads(threads)
 
 
 @pytest.fixture(scope="module")

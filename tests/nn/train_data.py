@@ -62,6 +62,18 @@ def build_tiny_dataset(out: Path) -> Path:
     return out
 
 
+@pytest.fixture(scope="module", autouse=True)
+def one_thread():
+    """One torch thread for a module's tests: two on a loaded 2-core machine spin-wait (10-50x
+    slower steps). Imported by the training test modules, where it applies to every test."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
 def tiny_dataset(tmp_path_factory) -> Path:
     """The session's tiny data set folder (built on first use)."""
     out = tmp_path_factory.getbasetemp() / "tiny-train-data"
