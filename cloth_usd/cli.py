@@ -56,6 +56,9 @@ def _parser() -> argparse.ArgumentParser:
     b.add_argument("--joint-map", metavar="FILE", help=_JOINT_MAP_HELP)
     b.add_argument("--force", action="store_true", help="replace existing output files")
     b.add_argument("--no-progress", action="store_true", help="hide the progress bar")
+    b.add_argument("--allow-any-size", action="store_true",
+                   help="bake a garment more than 3 times its body's height (refused by default: "
+                        "it is nearly always in the wrong units)")
     b.add_argument("--strict", action="store_true",
                    help="a learned frame that is not a garment (NaN, torn, far from the body) is an error "
                         "(exit 2, nothing written) instead of being replaced by the next safer tier")
@@ -219,7 +222,7 @@ def _bake(args: argparse.Namespace) -> int:
     result = bake(args.scene, args.output, shot=args.shot, frames=frames, garments=args.garment,
                   tier=tier, force=args.force, body_model=args.body_model, models=args.models,
                   joint_map=args.joint_map, progress=not args.no_progress and sys.stderr.isatty(),
-                  strict=args.strict)
+                  strict=args.strict, allow_any_size=args.allow_any_size)
     try:
         return _bake_summary(result)
     except OSError as exc:

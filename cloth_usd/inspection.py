@@ -22,6 +22,9 @@ class InspectReport:
     """One line each: contract violations found (the bake would refuse these prims)."""
     skipped: tuple[str, ...] = field(default=())
     """One line each: Skeletons no garment targets that are not SMPL skeletons, why and what to do."""
+    warnings: tuple[str, ...] = field(default=())
+    """One line each: garments that read but do not look worn by their body (implausible
+    size, far from its bones; :func:`cloth_usd.core.plausibility.scale_notes`)."""
 
 
 def inspect_stage(path: str | Path, *,
@@ -37,7 +40,23 @@ def inspect_stage(path: str | Path, *,
     problems: list[str] = []
     skipped: list[str] = []
     scene = read_scene(open_stage(path), problems=problems, skipped=skipped, joint_map=joint_map)
-    return InspectReport(scene=scene, problems=tuple(problems), skipped=tuple(skipped))
+    return InspectReport(scene=scene, problems=tuple(problems), skipped=tuple(skipped),
+                         warnings=tuple(_scale_warnings(scene)))
+
+
+def _scale_warnings(scene: Scene) -> list[str]:
+    """A line for each garment whose size or place does not fit its body."""
+    from .core.plausibility import garment_scale, scale_notes
+
+    characters = {c.prim_path: c for c in scene.characters}
+    lines = []
+    for g in scene.garments:
+        char = characters.get(g.body_path)
+        if char is None:
+            continue
+        for note in scale_notes(garment_scale(g.rest_points, char.rest_joints)):
+            lines.append(f"{g.prim_path}: {note}")
+    return lines
 
 
 def format_report(report: InspectReport) -> str:
@@ -63,6 +82,8 @@ def format_report(report: InspectReport) -> str:
         tier = g.tier.value if g.tier else "default"
         lines.append(f"  {g.prim_path}  {g.category.value}  body {g.body_path}  tier {tier}  {state}  "
                      f"{g.rest_points.shape[0]} vertices, {g.triangles.shape[0]} triangles")
+    lines.append(f"warnings    {len(report.warnings)}")
+    lines.extend(f"  {w}" for w in report.warnings)
     lines.append(f"problems    {len(report.problems)}")
     lines.extend(f"  {p}" for p in report.problems)
     return "\n".join(lines)

@@ -23,7 +23,8 @@ from ..core.frames import CanonicalMotion, canonical_motion
 from ..core.guard import GuardLimits
 from ..core.provenance import FileRecord, GarmentReport, Provenance
 from ..core.scene import Character, Tier
-from ..errors import ArgumentError
+from ..core.plausibility import SIZE_REFUSE, garment_scale
+from ..errors import ArgumentError, GarmentError
 from ..usd.provenance import to_custom_data
 from ..usd.read import garment_from_internal, read_motion
 from ..usd.write import CacheLayerWriter, check_output_path, remove_stale_temps, stage_shot_layer, write_shot_layer
@@ -75,6 +76,18 @@ def _provenance(plan: ResolvedBake, reports: Sequence[GarmentReport]) -> Provena
                       model_bundle=bundle, garments=tuple(reports), inputs_sha256=plan.inputs_sha256)
 
 
+def _check_garment_sizes(plan: ResolvedBake) -> None:
+    """GarmentError for the first chosen garment larger than SIZE_REFUSE times its body."""
+    characters = plan.characters()
+    for g in plan.chosen:
+        scale = garment_scale(g.rest_points, characters[g.body_path].rest_joints)
+        if scale.ratio > SIZE_REFUSE:
+            raise GarmentError(
+                f"{plan.scene.stage.identifier} <{g.prim_path}>: the garment is {scale.ratio:.2g} times its body's "
+                f"height ({scale.diagonal:.3g} m bounding-box diagonal, body {scale.body_height:.2f} m), more than "
+                f"{SIZE_REFUSE:g}: check its units (metersPerUnit, or a scale on the prim), or pass --allow-any-size")
+
+
 def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None = None,
          frames: FrameRange | str | None = None, garments: Sequence[str] | None = None,
          tier: Tier | str | None = None, force: bool = False,
@@ -83,7 +96,7 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
          batch_size: int | None = None, skip_current: bool = False, cache: ModelCache | None = None,
          on_progress: Callable[[str, int, int], None] | None = None, strict: bool = False,
          guard: GuardLimits = GuardLimits(), joint_map: dict[str, str] | str | Path | None = None,
-         max_cache_bytes: int | None = None) -> BakeResult:
+         max_cache_bytes: int | None = None, allow_any_size: bool = False) -> BakeResult:
     """Bake every enabled garment (or the named ones) of a stage into a point-cache layer.
 
     Args:
@@ -122,10 +135,14 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
             available (:func:`~cloth_usd.baking.size.check_size`). The cache itself is
             written in bounded memory (:data:`~cloth_usd.usd.write.FLUSH_BYTES` of points
             held at a time), whatever its length.
+        allow_any_size: bake a garment more than
+            :data:`~cloth_usd.core.plausibility.SIZE_REFUSE` times its body's height (refused
+            by default: such a garment is nearly always in the wrong units).
 
     Raises:
         ArgumentError: among others, ``shot`` is the same file as ``output``, or the cache
             would be too large (both before anything is computed).
+        GarmentError: a garment is implausibly large for its body (see ``allow_any_size``).
         OutputWriteError: a layer could not be saved (a full disk names the file and says
             "no space left on device"); neither the cache nor the shot layer is written.
     """
@@ -140,6 +157,8 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
         check_output_path(shot, force=force or skip_current, protected=protected)
     plan = resolve(stage, protected, frames=frames, garments=garments, tier=tier, body_model=body_model,
                    models=models, cache=cache, joint_map=joint_map)
+    if not allow_any_size:
+        _check_garment_sizes(plan)
     check_size(plan, max_cache_bytes, output=output)
     scene, times = plan.scene, plan.frames.times()
     scene_file = Path(stage.GetRootLayer().realPath)
