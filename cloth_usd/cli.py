@@ -173,6 +173,42 @@ def _parser() -> argparse.ArgumentParser:
                          "its entries replace a recognised rig's")
     im.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
     im.add_argument("--force", action="store_true", help="replace an existing output file")
+
+    cv = add_command("convert", help="a baked shot or cache to glTF (compressed morph-target animation) or to "
+                                     "vertex-animation textures, for game engines")
+    cv.add_argument("source", metavar="SHOT_OR_CACHE", help="shot layer (bake --shot) or cache layer (bake -o)")
+    cv.add_argument("-o", "--output", required=True, help="OUT.glb or OUT.gltf; with --format vat, a folder")
+    cv.add_argument("--format", choices=["gltf", "vat"], default="gltf",
+                    help="gltf (default): morph targets + weights; vat: SideFX Labs VAT 3.0 soft-body textures")
+    k = cv.add_mutually_exclusive_group()
+    k.add_argument("--max-error", type=float, metavar="MM",
+                   help="glTF: fewest morph targets whose worst vertex of any frame is within MM of the cache "
+                        "(default 1)")
+    k.add_argument("--targets", type=int, metavar="K", help="glTF: exactly K morph targets")
+    cv.add_argument("--with-body", action="store_true",
+                    help="glTF: add the body as a skinned mesh animated by the SMPL skeleton")
+    cv.add_argument("--garment", metavar="PRIM", help="the garment to convert (default: the only baked one)")
+    cv.add_argument("--scene", help="the scene a cache layer was baked from (default: its provenance's)")
+    cv.add_argument("--engine", choices=["unity", "unreal"], default="unity",
+                    help="vat: axes and unit of the textures (unity: metres; unreal: centimetres)")
+    cv.add_argument("--vat-format", choices=["exr", "png16"], default="exr",
+                    help="vat: half-float EXR (raw offsets, default) or 16-bit PNG (offsets normalised to the bounds)")
+    cv.add_argument("--max-width", type=int, default=8192, help="vat: widest texture; more vertices wrap to more "
+                                                                 "rows per frame (default 8192)")
+    cv.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
+    cv.add_argument("--force", action="store_true", help="replace existing output files")
+
+    pv = add_command("preview", help="one self-contained HTML page that plays a baked shot (three.js) with a timeline")
+    pv.add_argument("source", metavar="SHOT_OR_CACHE", help="shot layer (bake --shot) or cache layer (bake -o)")
+    pv.add_argument("-o", "--output", required=True, help="the .html page to write")
+    pk = pv.add_mutually_exclusive_group()
+    pk.add_argument("--max-error", type=float, metavar="MM", help="as for convert (default 1)")
+    pk.add_argument("--targets", type=int, metavar="K", help="as for convert")
+    pv.add_argument("--no-body", action="store_true", help="the garment alone")
+    pv.add_argument("--garment", metavar="PRIM", help="the garment to show (default: the only baked one)")
+    pv.add_argument("--scene", help="the scene a cache layer was baked from (default: its provenance's)")
+    pv.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
+    pv.add_argument("--force", action="store_true", help="replace an existing page")
     return p
 
 
@@ -403,6 +439,33 @@ def _import_motion(args: argparse.Namespace) -> int:
     return 0
 
 
+def _convert(args: argparse.Namespace) -> int:
+    from .export.convert import OutputFormat, convert
+    from .export.vat import Engine, TextureFormat
+
+    result = convert(args.source, args.output, fmt=OutputFormat(args.format), max_error_mm=args.max_error,
+                     targets=args.targets, with_body=args.with_body, garment=args.garment, scene=args.scene,
+                     body_model=args.body_model, engine=Engine(args.engine), vat_format=TextureFormat(args.vat_format),
+                     max_width=args.max_width, force=args.force)
+    what = f"{result.targets} morph targets" if result.targets is not None else "vertex-animation textures"
+    sys.stdout.write(f"{result.frames} frames, {result.vertices} vertices as {what}: error to the cache "
+                     f"max {result.max_error_mm:.3f} mm, mean {result.mean_error_mm:.4f} mm\n")
+    for f in result.files:
+        sys.stdout.write(f"wrote {f} ({f.stat().st_size / 1024:.0f} KiB)\n")
+    return 0
+
+
+def _preview(args: argparse.Namespace) -> int:
+    from .export.preview import write_preview
+
+    result = write_preview(args.source, args.output, max_error_mm=args.max_error, targets=args.targets,
+                           with_body=not args.no_body, garment=args.garment, scene=args.scene,
+                           body_model=args.body_model, force=args.force)
+    sys.stdout.write(f"{result.frames} frames, {result.targets} morph targets (max error {result.max_error_mm:.3f} mm)"
+                     f"\nwrote {result.path} ({result.path.stat().st_size / 1024:.0f} KiB; open it in a browser)\n")
+    return 0
+
+
 class _Terminated(BaseException):
     """SIGTERM (what farm schedulers send), raised where the process is, so that every
     ``with`` block and ``finally`` on the way out runs."""
@@ -423,7 +486,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         commands = {"inspect": _inspect, "bake": _bake, "doctor": _doctor, "render": _render, "batch": _batch,
                     "datagen": _datagen,
                     "train": _train, "export": _export, "evaluate": _evaluate,
-                    "import-motion": _import_motion}
+                    "import-motion": _import_motion, "convert": _convert, "preview": _preview}
         return commands[args.command](args)
     except ClothUsdError as exc:
         if args.verbose:
