@@ -13,6 +13,8 @@ bash scripts/setup.sh --no-sample
 # would download gigabytes of CUDA packages. smplx then finds it satisfied.
 "$VENV/bin/python" -m pip install -q "torch==2.13.0"
 "$VENV/bin/python" -m pip install -q -e ".[dev]"
+# The game-export tests: the glTF validator, three.js and esbuild (npm), headless chromium.
+bash scripts/setup_web.sh
 "$VENV/bin/python" -m pytest "$@"
 if [ "${CLOTH_USD_SKIP_BLENDER:-0}" != "1" ]; then
     bash scripts/test_addon.sh

@@ -144,14 +144,21 @@ def add_garment(builder: GltfBuilder, anim: MeshAnimation, basis: MorphBasis, *,
 
 
 def _top4(weights: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(V, 4) joint indices and (V, 4) weights: the 4 largest, renormalised (glTF's JOINTS_0)."""
-    order = np.argsort(-weights, axis=1)[:, :4]
+    """(V, 4) joint indices and (V, 4) weights: the 4 largest, renormalised (glTF's JOINTS_0).
+
+    An entry of weight 0 names joint 0, as the validator wants (and fewer than 4 joints
+    are padded so).
+    """
+    v, j = weights.shape
+    if j < 4:
+        weights = np.concatenate([weights, np.zeros((v, 4 - j))], axis=1)
+    order = np.argsort(-weights, axis=1, kind="stable")[:, :4]
     w = np.take_along_axis(weights, order, axis=1)
     w = np.where(w > 1e-6, w, 0.0)
     w = (w / w.sum(axis=1, keepdims=True)).astype(np.float32)
     w[:, 0] += np.float32(1.0) - w.sum(axis=1, dtype=np.float32)  # exact float32 sums
     order = np.where(w > 0, order, 0)
-    return order.astype(np.uint16 if weights.shape[1] > 255 else np.uint8), w
+    return order.astype(np.uint16 if j > 255 else np.uint8), w
 
 
 def _vertex_normals(vertices: np.ndarray, triangles: np.ndarray) -> np.ndarray:

@@ -107,8 +107,15 @@ def encode_normals(normals: np.ndarray) -> np.ndarray:
     length = np.linalg.norm(horizontal, axis=-1, keepdims=True)
     direction = np.where(length > 1e-12, horizontal / np.maximum(length, 1e-12), [1.0, 0.0])
     e = direction * np.sqrt(s)[..., None]
-    q = np.clip(np.rint((e + 2.0) / 4.0 * 31.5), 0, 31).astype(np.int64)
-    return q[..., 0] * 32 + q[..., 1]
+    q = (e + 2.0) / 4.0 * 31.5
+    best, best_dot = None, None
+    for dx in (0, 1):  # the neighbouring code that decodes closest to the normal
+        for dy in (0, 1):
+            code = (np.clip(np.floor(q[..., 0]) + dx, 0, 31) * 32 + np.clip(np.floor(q[..., 1]) + dy, 0, 31))
+            dot = np.sum(decode_normals(code / 1024.0) * n, axis=-1)
+            best = code if best is None else np.where(dot > best_dot, code, best)
+            best_dot = dot if best_dot is None else np.maximum(dot, best_dot)
+    return best.astype(np.int64)
 
 
 def decode_normals(alpha: np.ndarray) -> np.ndarray:
