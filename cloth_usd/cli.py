@@ -127,6 +127,25 @@ def _parser() -> argparse.ArgumentParser:
     tr.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
     tr.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
 
+    tg = add_command("train-garment", help="train and export a model bundle for one garment of your own, from its "
+                                           "mesh alone (the physics objective; no simulation)")
+    tg.add_argument("scene", help="USD stage with the garment (a cloth:category Mesh on an SMPL character)")
+    tg.add_argument("-o", "--out", required=True, help="bundle folder to write (bake with --models OUT)")
+    tg.add_argument("--garment", metavar="PRIM", help="the garment prim (default: the stage's only garment)")
+    tg.add_argument("--name", help="bundle name (default: the bundle folder's name)")
+    tg.add_argument("--work", metavar="DIR", help="folder for the data config and the two runs (default: OUT.work)")
+    tg.add_argument("--motions", metavar="JSON", help="extra training motions: a JSON list of train_motions "
+                                                     "entries (procedural or {\"bvh\": ...}; see cloth-usd datagen)")
+    tg.add_argument("--mocap", metavar="DIR", help="the folder the --motions BVH clips are relative to")
+    tg.add_argument("--coarse-epochs", type=int, default=8, help="coarse epochs (default 8)")
+    tg.add_argument("--detail-epochs", type=int, default=3, help="detail epochs (default 3)")
+    tg.add_argument("--batches", type=int, default=100, help="batches of 8 frames per coarse epoch (default 100; "
+                                                             "the detail model takes 60%%)")
+    tg.add_argument("--threads", type=int, help="torch CPU threads")
+    tg.add_argument("--device", default="auto", help="torch device (default: CUDA when present)")
+    tg.add_argument("--joint-map", metavar="FILE", help=_JOINT_MAP_HELP)
+    tg.add_argument("--force", action="store_true", help="replace the bundle and the runs of an earlier call")
+
     ex = add_command("export", help="export trained runs to ONNX and write a verified model bundle")
     ex.add_argument("--coarse-run", required=True, help="trained coarse run folder")
     ex.add_argument("--detail-run", help="trained detail run folder (optional)")
@@ -423,6 +442,59 @@ def _evaluate(args: argparse.Namespace) -> int:
     return 0
 
 
+def _train_garment(args: argparse.Namespace) -> int:
+    import json
+    from pathlib import Path
+
+    import numpy as np
+
+    from .core.body import load_body_model, shape_body
+    from .core.frames import rest_orientation
+    from .errors import ArgumentError
+    from .nn.own_garment import OwnGarmentPlan, train_own_garment
+    from .usd.read import open_stage, read_scene
+
+    plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches)
+    motions: tuple = ()
+    if args.motions:
+        try:
+            motions = tuple(json.loads(Path(args.motions).read_text()))
+        except (OSError, ValueError, TypeError) as exc:
+            raise ArgumentError(f"--motions {args.motions}: not a readable JSON list ({exc})") from None
+    scene = read_scene(open_stage(args.scene), joint_map=args.joint_map)
+    garments = [g for g in scene.garments if args.garment in (None, g.prim_path)]
+    if len(garments) != 1:
+        found = ", ".join(g.prim_path for g in scene.garments) or "none"
+        raise ArgumentError(f"{args.scene}: " + (f"no garment {args.garment} (garments: {found})" if args.garment
+                            else f"name the garment with --garment (garments: {found})"))
+    garment = garments[0]
+    char = next(c for c in scene.characters if c.prim_path == garment.body_path)
+    body = load_body_model()
+    joints = shape_body(body, char.betas)[1]
+    turn = rest_orientation(char.rest_joints, joints)
+    rest = (garment.rest_points - char.rest_root_position) @ turn + joints[0]
+    if args.threads:
+        import torch
+
+        torch.set_num_threads(args.threads)
+
+    def show(tier, r) -> None:
+        sys.stdout.write(f"{tier} epoch {r.epoch + 1}: val {r.val_loss:+.4g} J ({r.val_mm:.2f} mm from "
+                         f"{'skinning' if tier == 'coarse' else 'the coarse garment'}), {r.seconds:.0f} s\n")
+        sys.stdout.flush()
+
+    out = Path(args.out)
+    result = train_own_garment(rest, garment.triangles, char.betas, out, name=args.name or out.name,
+                               category=garment.category, work_dir=args.work, motions=motions, mocap_dir=args.mocap,
+                               plan=plan, force=args.force, device=args.device, body=body, progress=show)
+    t = result.seconds
+    sys.stdout.write(f"wrote bundle {result.bundle} for {garment.prim_path} ({rest.shape[0]} vertices) in "
+                     f"{t['total'] / 60:.1f} min (coarse {t['coarse'] / 60:.1f}, detail {t['detail'] / 60:.1f}, "
+                     f"export {t['export']:.0f} s); runs and config in {result.work_dir}\n"
+                     f"bake with: cloth-usd bake {args.scene} -o CACHE.usdc --tier detail --models {result.bundle}\n")
+    return 0
+
+
 def _import_motion(args: argparse.Namespace) -> int:
     from .motion_import import import_motion, parse_betas
 
@@ -486,7 +558,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         commands = {"inspect": _inspect, "bake": _bake, "doctor": _doctor, "render": _render, "batch": _batch,
                     "datagen": _datagen,
                     "train": _train, "export": _export, "evaluate": _evaluate,
-                    "import-motion": _import_motion, "convert": _convert, "preview": _preview}
+                    "import-motion": _import_motion, "train-garment": _train_garment, "convert": _convert, "preview": _preview}
         return commands[args.command](args)
     except ClothUsdError as exc:
         if args.verbose:

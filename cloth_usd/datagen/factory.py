@@ -25,7 +25,8 @@ from ..core.body import load_body_model, shape_body
 from ..core.files import check_keys, read_config
 from ..core.fit import FitModel, common_anchors, fit_factor_analysis, pair_distances
 from ..errors import ArgumentError
-from .bodies import body_shapes
+from ..core.transfer import transfer_garment
+from .bodies import BodyShape, body_shapes
 from .dataset import MANIFEST_NAME, DatasetConfig, Job, Manifest, run_jobs
 from .floor import FLOOR_SPLIT, FloorSpec, floor_jobs
 from .mocap import MocapSpec, mocap_motion
@@ -33,7 +34,7 @@ from .simulate import SimConfig
 from .motion import MotionKind, MotionSpec, generate
 from .tshirt import make_tshirt, tshirt_variants
 
-__all__ = ["FactoryConfig", "MOCAP_ENV", "load_config", "plan_jobs", "drape_pairs", "run_factory"]
+__all__ = ["FactoryConfig", "MOCAP_ENV", "OWN_BODY", "OwnGarment", "save_own_garment", "load_own_garment", "load_config", "plan_jobs", "drape_pairs", "run_factory"]
 
 #: The environment variable naming the mocap folder when neither the config nor ``--mocap`` does.
 MOCAP_ENV = "CLOTH_USD_MOCAP"
@@ -81,6 +82,14 @@ class FactoryConfig:
     """The per-frame error floor (a :class:`FloorSpec`'s fields): for some of the sequences
     to be simulated, a few of their frames' poses held until the cloth settles, each its own
     sequence of split ``floor`` (see :mod:`cloth_usd.datagen.floor`). None: none."""
+    garment: str | None = None
+    """A garment of the user's own instead of the generated T-shirts: a ``.npz`` with
+    ``vertices`` (N, 3) [m] (worn by the rest body, canonical body frame), ``faces`` (M, 3)
+    and ``betas`` (the body it was made for); a relative path is relative to the config
+    file's folder. It is worn by every body of ``bodies`` (carried onto each shape by
+    :func:`~cloth_usd.core.transfer.transfer_garment`) and by its own body, named
+    ``own``; ``shirts``, ``seed``, ``garment_vertices`` and ``test_shirts`` do not apply
+    (there is no unseen garment). Written by ``cloth-usd train-garment``."""
     mocap_dir: str | None = None
     """The folder the ``bvh`` motions are relative to (a relative one: to the config file's
     folder). Usually given at run time (``--mocap DIR`` or ``$CLOTH_USD_MOCAP``), since the
@@ -100,6 +109,8 @@ def load_config(path: str | Path, *, mocap_dir: str | Path | None = None) -> Fac
     for key in ("test_shirts", "bodies", "test_bodies", "train_motions", "test_motions", "simulate_splits"):
         if key in raw:
             raw[key] = tuple(raw[key])
+    if raw.get("garment"):
+        raw["garment"] = str(path.parent / raw["garment"])
     if mocap_dir is not None:
         raw["mocap_dir"] = str(mocap_dir)
     elif raw.get("mocap_dir"):
@@ -160,9 +171,14 @@ def _shirt_label(params) -> str:
 def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     """Every sequence of the data set, each tagged with its split in ``meta``."""
     body = body if body is not None else load_body_model()
-    variants = tshirt_variants(config.shirts, seed=config.seed)
-    if config.garment_vertices:
-        variants = [dataclasses.replace(v, target_vertices=config.garment_vertices) for v in variants]
+    own = load_own_garment(config.garment) if config.garment else None
+    if own is not None:
+        config = dataclasses.replace(config, test_shirts=())
+        variants = [None]
+    else:
+        variants = tshirt_variants(config.shirts, seed=config.seed)
+        if config.garment_vertices:
+            variants = [dataclasses.replace(v, target_vertices=config.garment_vertices) for v in variants]
     bad = [i for i in config.test_shirts if not 0 <= i < len(variants)]
     if bad:
         raise ArgumentError(f"test_shirts {bad}: out of range for {len(variants)} shirts")
@@ -170,8 +186,12 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     bad = sorted(set(config.simulate_splits or ()) - set(splits))
     if bad:
         raise ArgumentError(f"simulate_splits {bad}: unknown (valid: {', '.join(splits)})")
-    shapes = {s.name: s for s in body_shapes(list(config.bodies))}
-    body_shapes(list(config.test_bodies))  # validates the names
+    shapes = {s.name: s for s in body_shapes([b for b in config.bodies if b != OWN_BODY])}
+    if own is not None:
+        shapes[OWN_BODY] = BodyShape(OWN_BODY, own.betas)
+    elif OWN_BODY in config.bodies:
+        raise ArgumentError(f"bodies: {OWN_BODY!r} is the body of the config's own garment, and it names none")
+    body_shapes([b for b in config.test_bodies if b != OWN_BODY])  # validates the names
     train_shirts = [i for i in range(len(variants)) if i not in config.test_shirts]
     train_bodies = [n for n in config.bodies if n not in config.test_bodies]
     mean_joints = shape_body(body, np.zeros(1))[1]
@@ -196,10 +216,12 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     jobs = []
     for split, s, b, motion in plan:
         if (s, b) not in garments:
-            garments[(s, b)] = make_tshirt(body, shapes[b].betas, variants[s])
+            garments[(s, b)] = make_tshirt(body, shapes[b].betas, variants[s]) if own is None else \
+                (transfer_garment(body, own.vertices, own.betas, shapes[b].betas), own.faces)
         verts, faces = garments[(s, b)]
-        meta = {"split": split, "shirt": s, "shirt_params": dataclasses.asdict(variants[s]),
-                "shirt_label": _shirt_label(variants[s]), "body": b,
+        params = {"file": Path(config.garment).name} if own is not None else dataclasses.asdict(variants[s])
+        meta = {"split": split, "shirt": s, "shirt_params": params,
+                "shirt_label": "own" if own is not None else _shirt_label(variants[s]), "body": b,
                 "body_label": _body_label(shapes[b].betas), "motion": motion.name, "fps": motion.fps}
         if motion.warmup_frames:
             meta["warmup_frames"] = motion.warmup_frames
@@ -213,6 +235,48 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
         simulated = [j for j in jobs if config.simulate_splits is None or j.meta["split"] in config.simulate_splits]
         jobs += floor_jobs(simulated, spec)
     return jobs
+
+
+#: The body name of a config's own garment (:attr:`FactoryConfig.garment`): the body it was made for.
+OWN_BODY = "own"
+
+
+@dataclass(frozen=True)
+class OwnGarment:
+    """A user's garment as :attr:`FactoryConfig.garment` names it."""
+
+    vertices: np.ndarray
+    """(N, 3) float64 rest points [m], canonical body frame."""
+    faces: np.ndarray
+    """(M, 3) int64 triangles."""
+    betas: np.ndarray
+    """(10,) float64 the shape of the body it was made for."""
+
+
+def save_own_garment(path: str | Path, vertices: np.ndarray, faces: np.ndarray, betas: np.ndarray) -> Path:
+    """Write the ``.npz`` :attr:`FactoryConfig.garment` reads (no pickle)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    b = np.zeros(10)
+    b[:min(10, len(betas))] = np.asarray(betas, dtype=np.float64)[:10]
+    np.savez(path, vertices=np.asarray(vertices, dtype=np.float64), faces=np.asarray(faces, dtype=np.int64),
+             betas=b)
+    return path
+
+
+def load_own_garment(path: str | Path) -> OwnGarment:
+    """Read a :attr:`FactoryConfig.garment` file; anything malformed is an error naming it."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            v, f, b = (np.asarray(z[k]) for k in ("vertices", "faces", "betas"))
+    except (OSError, KeyError, ValueError) as exc:
+        raise ArgumentError(f"garment {path}: unreadable ({exc}); it needs vertices, faces and betas") from None
+    if v.ndim != 2 or v.shape[1] != 3 or not np.all(np.isfinite(v)) or f.ndim != 2 or f.shape[1] != 3 \
+            or f.size == 0 or f.min() < 0 or f.max() >= v.shape[0]:
+        raise ArgumentError(f"garment {path}: vertices must be finite (N, 3) and faces (M, 3) indices below N")
+    betas = np.zeros(10)
+    betas[:min(10, b.size)] = b.ravel()[:10]
+    return OwnGarment(vertices=v.astype(np.float64), faces=f.astype(np.int64), betas=betas)
 
 
 def _worker(args: tuple) -> None:

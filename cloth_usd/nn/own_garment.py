@@ -1,0 +1,181 @@
+"""A model bundle for one garment of the user's own, from its mesh alone (``cloth-usd train-garment``).
+
+The garment (its rest points as worn, triangles, and the betas of the body it was made
+for) is written into a work folder beside a data set config that names it
+(:attr:`~cloth_usd.datagen.factory.FactoryConfig.garment`): it is worn by its own body
+and carried onto four more shapes across the shape space (slim, broad, short and fat,
+tall and thin), the five training pairs the fit attribute needs. The motions are the
+seven procedural ones, plus any the user lists (real clips among them, with a mocap
+folder). Then the coarse model and the detail model are trained on the garment's own
+physics (:func:`~cloth_usd.nn.physics_train.train_physics`: no simulation), and both are
+exported and verified as a bundle (:func:`~cloth_usd.nn.export.export_bundle`). The work
+folder keeps the config and both runs (curves, histories), so each step can be rerun by
+hand with ``cloth-usd train`` and ``cloth-usd export``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from ..core.body import BodyModel, load_body_model
+from ..core.scene import Category, Tier
+from ..errors import ArgumentError
+
+__all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "TRAIN_BODIES", "train_own_garment"]
+
+log = logging.getLogger(__name__)
+
+#: The shapes the garment is carried onto, besides its own body (``own``).
+TRAIN_BODIES = ("slim", "broad", "short_fat", "tall_thin")
+#: A body no pair trains on: the validation sequence wears the garment on it.
+VAL_BODY = "medium_thin"
+#: The procedural motions every run trains on (1 s at 30 fps, blended in from rest).
+PROCEDURAL_MOTIONS = tuple({"kind": k, "seconds": 1.0, "fps": 30, "seed": i, "blend_seconds": 0.25}
+                           for i, k in enumerate(("walk", "run", "arm_raise", "arm_swing", "torso_twist",
+                                                  "torso_bend", "dance")))
+#: The held-out motions (validation uses the last; the others are for ``cloth-usd datagen``
+#: of the same config, should the user simulate a test set).
+TEST_MOTIONS = ({"kind": "dance", "seconds": 2.0, "fps": 30, "seed": 100, "blend_seconds": 0.25},
+                {"kind": "walk", "seconds": 2.0, "fps": 30, "seed": 101, "blend_seconds": 0.25})
+DATA_CONFIG = "data.json"
+GARMENT_FILE = "garment.npz"
+
+
+@dataclass(frozen=True)
+class OwnGarmentPlan:
+    """How much training a user's garment gets; the defaults fit about 25 minutes of a
+    2-core CPU for a 3500-vertex shirt (see the README)."""
+
+    coarse_epochs: int = 8
+    """Epochs of the coarse model (``max_batches`` batches each)."""
+    detail_epochs: int = 3
+    """Epochs of the detail model."""
+    batches: int = 100
+    """Batches of 8 frames per coarse epoch; the detail model takes 60% of it."""
+    coarse_width: float = 0.0625
+    """The coarse model's width (the shipped bundles': the fast tier)."""
+    detail_width: float = 0.125
+    """The detail model's width."""
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("coarse_epochs", "detail_epochs", "batches"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or value < 1:
+                raise ArgumentError(f"--{name.replace('_', '-')} must be an integer >= 1, got {value!r}")
+
+    def coarse_config(self) -> dict:
+        return {"objective": "physics", "coarse_base": "skinned", "heading": "canonical", "bending_scale": 10.0,
+                "epochs": self.coarse_epochs, "lr": 1e-3, "lr_decay": 0.9, "batch": 8, "width": self.coarse_width,
+                "seed": self.seed, "max_batches": self.batches}
+
+    def detail_config(self) -> dict:
+        return {"objective": "physics", "bending_scale": 1.0, "epochs": self.detail_epochs, "lr": 1e-3,
+                "lr_decay": 0.9, "batch": 8, "width": self.detail_width, "seed": self.seed,
+                "max_batches": max(1, int(round(0.6 * self.batches)))}
+
+
+@dataclass(frozen=True)
+class OwnGarmentResult:
+    """What :func:`train_own_garment` made and how long each step took."""
+
+    bundle: Path
+    work_dir: Path
+    seconds: dict
+    """``{"coarse": s, "detail": s, "export": s, "total": s}`` wall time."""
+    coarse_val: tuple[float, float]
+    """The coarse run's best validation: energy against skinning [J a frame], distance from it [mm]."""
+    detail_val: tuple[float, float]
+    """The detail run's best validation: energy against the coarse garment [J], distance [mm]."""
+
+
+def _write_json(path: Path, data: dict) -> None:
+    path.write_text(json.dumps(data, indent=1) + "\n")
+
+
+def _best(result) -> tuple[float, float]:
+    r = next((r for r in result.history if r.epoch == result.best_epoch), result.history[-1])
+    return float(r.val_loss), float(r.val_mm)
+
+
+def train_own_garment(vertices: np.ndarray, faces: np.ndarray, betas: np.ndarray, out_dir: str | Path, *,
+                      name: str, category: Category | str = Category.TSHIRT, work_dir: str | Path | None = None,
+                      motions: tuple[dict, ...] = (), mocap_dir: str | Path | None = None,
+                      plan: OwnGarmentPlan = OwnGarmentPlan(), force: bool = False, device: str | None = "auto",
+                      body: BodyModel | None = None,
+                      progress: Callable[[str, object], None] | None = None) -> OwnGarmentResult:
+    """Train and export a bundle for one garment from its mesh (see the module docstring).
+
+    Args:
+        vertices: (N, 3) float garment rest points [m], canonical body frame of ``betas``.
+        faces: (M, 3) int triangles.
+        betas: (B,) the shape of the body it was made for.
+        out_dir: the bundle folder to write.
+        name: the bundle's name (recorded in every cache it bakes).
+        category: the garment's category (the bundle's).
+        work_dir: where the config and the runs go (default: ``<out_dir>.work``).
+        motions: extra training motions, entries as a data set config's ``train_motions``.
+        mocap_dir: the folder their ``bvh`` entries are relative to.
+        plan: epochs, batches and widths.
+        force: replace an existing bundle, and runs this command left in ``work_dir``.
+        progress: called with ``(tier, EpochRecord)`` after every epoch.
+    Raises:
+        ArgumentError: an existing bundle or work folder without ``force``, or a bad motion.
+    """
+    from ..datagen.factory import save_own_garment
+    from .export import export_bundle
+    from .physics_train import load_physics_config, train_physics
+
+    category = Category(category)
+    out_dir = Path(out_dir)
+    work = Path(work_dir) if work_dir is not None else out_dir.with_name(out_dir.name + ".work")
+    if out_dir.exists() and any(out_dir.iterdir()) and not force:
+        raise ArgumentError(f"-o {out_dir}: exists and is not empty (pass --force to replace the bundle)")
+    runs = {tier: work / tier for tier in ("coarse", "detail")}
+    for tier, run in runs.items():
+        if run.exists():
+            if not force:
+                raise ArgumentError(f"--work {work}: holds a {tier} run from an earlier call (pass --force to "
+                                    "replace it, or pick another --work folder)")
+            if not (run / "run.json").exists() and any(run.iterdir()):
+                raise ArgumentError(f"--work {work}: {run} is not a training run; not removing it")
+            shutil.rmtree(run)
+    work.mkdir(parents=True, exist_ok=True)
+    body = body if body is not None else load_body_model()
+    save_own_garment(work / GARMENT_FILE, vertices, faces, betas)
+    data = {"garment": GARMENT_FILE, "bodies": ["own", *TRAIN_BODIES, VAL_BODY], "test_bodies": [VAL_BODY],
+            "test_body_shirts": 1, "sim": {"fps": 30}, "train_motions": [*PROCEDURAL_MOTIONS, *motions],
+            "test_motions": list(TEST_MOTIONS)}
+    _write_json(work / DATA_CONFIG, data)
+    _write_json(work / "coarse.json", plan.coarse_config())
+    _write_json(work / "detail.json", plan.detail_config())
+    seconds: dict[str, float] = {}
+    began = time.perf_counter()
+    results = {}
+    for tier in ("coarse", "detail"):
+        t0 = time.perf_counter()
+        config, options = load_physics_config(work / f"{tier}.json")
+        results[tier] = train_physics(
+            work / DATA_CONFIG, runs[tier], config, tier=Tier(tier),
+            coarse_run=runs["coarse"] if tier == "detail" else None, device=device, body=body,
+            progress=(lambda r, tier=tier: progress(tier, r)) if progress is not None else None,
+            options=options, mocap_dir=mocap_dir)
+        seconds[tier] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    export_bundle(runs["coarse"], runs["detail"], work / DATA_CONFIG, out_dir, name=name, category=category.value,
+                  description=f"{name}: one garment ({np.asarray(vertices).shape[0]} vertices) trained on its "
+                              "physics by cloth-usd train-garment", force=force, body=body, mocap_dir=mocap_dir)
+    seconds["export"] = time.perf_counter() - t0
+    seconds["total"] = time.perf_counter() - began
+    _write_json(work / "timing.json", {k: round(v, 1) for k, v in seconds.items()})
+    log.info("%s: bundle in %s after %.1f min", name, out_dir, seconds["total"] / 60)
+    return OwnGarmentResult(bundle=out_dir, work_dir=work, seconds=seconds, coarse_val=_best(results["coarse"]),
+                            detail_val=_best(results["detail"]))

@@ -1,0 +1,99 @@
+"""A user's own garment: the data set config that names it, and ``cloth-usd train-garment``."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cloth_usd.core.body import load_body_model, shape_body
+from cloth_usd.datagen import TShirtParams, make_tshirt
+from cloth_usd.datagen.factory import OWN_BODY, load_config, plan_jobs, save_own_garment
+from cloth_usd.errors import ArgumentError
+
+SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "walk_tshirt" / "scene.usda"
+
+
+@pytest.fixture(scope="module")
+def own_config(tmp_path_factory):
+    """A 300-vertex shirt made for a broad body, named by a config as the user's own."""
+    body = load_body_model()
+    betas = np.r_[1.0, 1.0, np.zeros(8)]
+    verts, faces = make_tshirt(body, betas, TShirtParams(target_vertices=300))
+    root = tmp_path_factory.mktemp("own")
+    save_own_garment(root / "g.npz", verts, faces, betas)
+    (root / "data.json").write_text(json.dumps({
+        "garment": "g.npz", "bodies": [OWN_BODY, "slim", "short_fat", "tall_thin", "medium_thin"],
+        "test_bodies": ["medium_thin"], "max_frames": 3,
+        "train_motions": [{"kind": "walk", "seconds": 1.0, "seed": 0}],
+        "test_motions": [{"kind": "dance", "seconds": 1.0, "seed": 5}]}))
+    return root / "data.json", verts, faces, betas
+
+
+def test_every_sequence_wears_the_one_garment_carried_onto_its_body(own_config):
+    path, verts, faces, betas = own_config
+    body = load_body_model()
+    jobs = plan_jobs(load_config(path), body)
+    assert {j.meta["split"] for j in jobs} == {"train", "val", "test_body", "test_motion"}  # no unseen garment
+    for job in jobs:
+        np.testing.assert_array_equal(job.garment_faces, faces)
+        assert job.meta["shirt_label"] == "own" and job.meta["shirt_params"] == {"file": "g.npz"}
+    own = next(j for j in jobs if j.meta["body"] == OWN_BODY)
+    np.testing.assert_allclose(own.garment_vertices, verts, atol=1e-12)
+    np.testing.assert_allclose(own.betas, betas)
+    # on a short, fat body the shirt sits as far from the body as on its own
+    from cloth_usd.core.association import associate
+
+    fat = next(j for j in jobs if j.meta["body"] == "short_fat")
+    gap_own = associate(verts, shape_body(body, betas)[0], body.faces).distance
+    gap_fat = associate(fat.garment_vertices, shape_body(body, fat.betas)[0], body.faces).distance
+    assert abs(np.median(gap_fat) - np.median(gap_own)) < 2e-3, (np.median(gap_fat), np.median(gap_own))
+
+
+def test_a_config_without_a_garment_cannot_name_the_own_body(tmp_path):
+    (tmp_path / "c.json").write_text(json.dumps({"bodies": [OWN_BODY, "slim"], "test_bodies": []}))
+    with pytest.raises(ArgumentError, match="own garment"):
+        plan_jobs(load_config(tmp_path / "c.json"))
+
+
+def test_a_broken_garment_file_is_one_line_naming_it(tmp_path):
+    np.savez(tmp_path / "g.npz", vertices=np.zeros((3, 3)), faces=np.array([[0, 1, 5]]), betas=np.zeros(10))
+    (tmp_path / "c.json").write_text(json.dumps({"garment": "g.npz", "bodies": [OWN_BODY, "slim"],
+                                                 "test_bodies": []}))
+    with pytest.raises(ArgumentError, match="g.npz"):
+        plan_jobs(load_config(tmp_path / "c.json"))
+
+
+def test_train_garment_refuses_an_existing_bundle_and_a_stage_without_that_garment(tmp_path, capsys):
+    from cloth_usd.cli import main
+
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "manifest.json").write_text("{}")
+    assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "b")]) == 2
+    assert "--force" in capsys.readouterr().err
+    assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--garment", "/Nope"]) == 2
+    err = capsys.readouterr().err
+    assert "/Nope" in err and "/Character/Tshirt" in err and not (tmp_path / "c").exists()
+
+
+@pytest.mark.slow
+def test_train_garment_makes_a_bundle_that_bakes_the_sample(tmp_path, capsys):
+    pytest.importorskip("torch", reason="training needs torch (pip install 'cloth-usd[train]')")
+    from cloth_usd.cli import main
+    from cloth_usd.runtime.bundle import load_bundle
+
+    out = tmp_path / "mine"
+    assert main(["train-garment", str(SAMPLE), "-o", str(out), "--coarse-epochs", "1", "--detail-epochs", "1",
+                 "--batches", "1", "--threads", "1", "--device", "cpu"]) == 0
+    said = capsys.readouterr().out
+    assert "wrote bundle" in said and "3516 vertices" in said
+    bundle = load_bundle(out)
+    assert bundle.manifest["category"] == "tshirt" and bundle.manifest["name"] == "mine"
+    assert json.loads((tmp_path / "mine.work" / "timing.json").read_text())["total"] > 0
+    assert main(["bake", str(SAMPLE), "-o", str(tmp_path / "c.usdc"), "--tier", "detail", "--models", str(out),
+                 "--frames", "1001:1003", "--no-progress"]) == 0
+    assert "bundle mine" in capsys.readouterr().err + capsys.readouterr().out or (tmp_path / "c.usdc").is_file()
+    # a second call refuses to replace the runs and the bundle, unless forced
+    assert main(["train-garment", str(SAMPLE), "-o", str(out)]) == 2
