@@ -42,6 +42,7 @@ function start() {
   const label = document.getElementById('label');
   const play = document.getElementById('play');
   const frames = cfg.frames;
+  const times = cfg.times; // seconds of each baked frame (a bake may step over time codes)
   const track = cfg.track; // garment centre per frame [m]: the camera follows it
   slider.max = String(frames - 1);
   let mixer = null;
@@ -68,7 +69,7 @@ function start() {
   function show(f) {
     frame = Math.max(0, Math.min(frames - 1, f));
     slider.value = String(frame);
-    label.textContent = `frame ${frame + 1} / ${frames}   time code ${(cfg.first + frame).toFixed(0)}`;
+    label.textContent = `frame ${frame + 1} / ${frames}   time code ${cfg.codes[frame]}`;
     follow(frame);
   }
 
@@ -80,7 +81,7 @@ function start() {
     playing = false;
     play.textContent = 'Play';
     const f = Number(slider.value);
-    if (mixer) mixer.setTime(f / cfg.fps);
+    if (mixer) mixer.setTime(times[f]);
     show(f);
   });
   window.addEventListener('resize', resize);
@@ -110,7 +111,9 @@ function start() {
       const dt = timer.getDelta();
       if (mixer && playing) {
         mixer.update(dt);
-        show(Math.round(action.time * cfg.fps) % frames);
+        let f = 0;
+        while (f + 1 < frames && times[f + 1] <= action.time + 1e-6) f += 1;
+        show(f);
       }
       controls.update();
       renderer.render(scene, camera);

@@ -67,16 +67,19 @@ def _player() -> str:
     return js.replace("</script", "<\\/script")  # the page's parser must not see it end early
 
 
-def preview_html(glb: bytes, *, title: str, fps: float, first_time_code: float, track: np.ndarray,
+def preview_html(glb: bytes, *, title: str, times: np.ndarray, time_codes: np.ndarray, track: np.ndarray,
                  floor: float) -> str:
     """The page for a .glb.
 
     Args:
+        times: (T,) seconds of each frame (the glb's animation keys).
+        time_codes: (T,) the USD time code of each frame, shown on the timeline.
         track: (T, 3) the garment's centre per frame [m]; the camera follows it.
         floor: height of the ground grid [m].
     """
-    data = {"glb": base64.b64encode(glb).decode(), "fps": fps, "frames": int(track.shape[0]),
-            "first": first_time_code, "track": np.round(track, 4).tolist(), "floor": floor}
+    data = {"glb": base64.b64encode(glb).decode(), "frames": int(track.shape[0]),
+            "times": [float(t) for t in times], "codes": [f"{c:g}" for c in time_codes],
+            "track": np.round(track, 4).tolist(), "floor": floor}
     return _PAGE.format(title=html.escape(title), heading=html.escape(title), data=json.dumps(data),
                         player=_player())
 
@@ -95,7 +98,7 @@ def write_preview(source: str | os.PathLike, output: str | os.PathLike, *, max_e
         lowest = min(lowest, float(body.rest_vertices[:, 1].min() - body.rest_joints[0, 1]
                                    + body.root_translation[:, 1].min()))
     title = f"{Path(os.fspath(source)).name}: {anim.name}, {anim.points.shape[0]} frames at {anim.fps:g} fps"
-    page = preview_html(glb, title=title, fps=anim.fps, first_time_code=float(anim.time_codes[0]),
+    page = preview_html(glb, title=title, times=anim.times, time_codes=anim.time_codes,
                         track=anim.points.mean(axis=1), floor=float(lowest))
     write_atomic(out, page.encode("utf-8"))
     err = vertex_errors(basis.reconstruct(), anim.points)

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import enum
 import json
+import logging
 import os
 import struct
 import tempfile
@@ -41,6 +42,8 @@ from ..core.animation import MeshAnimation
 from ..errors import ArgumentError, ClothUsdError, OutputWriteError
 from .files import check_output_dir, write_atomic
 from .gltf import GltfBuilder, _ARRAY_BUFFER, _FLOAT, _vertex_normals, glb_bytes
+
+_log = logging.getLogger(__name__)
 
 __all__ = ["Engine", "TextureFormat", "VatLayout", "VatResult", "vat_layout", "encode_normals", "decode_normals",
            "write_vat", "decode_vat", "write_png16", "read_png16", "ENGINE_AXES"]
@@ -239,6 +242,10 @@ def write_vat(anim: MeshAnimation, out_dir: str | os.PathLike, *, engine: Engine
     out = check_output_dir(out_dir, force=force, names=names.values())
     points = np.asarray(anim.points, dtype=np.float64)
     t, n = points.shape[:2]
+    steps = np.diff(anim.times)
+    if steps.size and np.ptp(steps) > 1e-6 * max(1.0, float(steps.max())):
+        _log.warning("%s: frames are not evenly spaced in time (%g to %g s apart); VAT plays them evenly at "
+                     "%g fps", anim.name, steps.min(), steps.max(), frame_rate(anim))
     layout = vat_layout(n, t, max_width=max_width)
     axes, scale = ENGINE_AXES[engine]
     offsets = np.einsum("ij,tnj->tni", axes, points - points[0]) * scale  # engine axes and units
@@ -296,21 +303,28 @@ def _vat_mesh(anim: MeshAnimation, rest: np.ndarray, layout: VatLayout) -> tuple
     return b.finish()
 
 
+def frame_rate(anim: MeshAnimation) -> float:
+    """Frames per second of the samples (a bake that steps over time codes has fewer)."""
+    t = anim.times.shape[0]
+    return float((t - 1) / anim.times[-1]) if t > 1 and anim.times[-1] > 0 else anim.fps
+
+
 def _vat_data(anim, layout, engine, fmt, bound_min, bound_max, lo, hi, names, extras) -> dict:
     unit = "m" if engine is Engine.UNITY else "cm"
-    material = {"Frame Count": layout.frames, "Houdini FPS": anim.fps,
+    fps = frame_rate(anim)
+    material = {"Frame Count": layout.frames, "Houdini FPS": fps,
                 **{f"Bound Max {a}": float(v) for a, v in zip("XYZ", bound_max)},
                 **{f"Bound Min {a}": float(v) for a, v in zip("XYZ", bound_min)},
                 "Positions Require Two Textures": False, "Use Compressed Normals": True,
                 "Interpolate": True, "Auto Playback": True}
-    unity = {"_frameCount": layout.frames, "_houdiniFPS": anim.fps,
+    unity = {"_frameCount": layout.frames, "_houdiniFPS": fps,
              **{f"_boundMax{a}": float(v) for a, v in zip("XYZ", bound_max)},
              **{f"_boundMin{a}": float(v) for a, v in zip("XYZ", bound_min)},
              "_B_autoPlayback": 1, "_B_interpolate": 1, "_B_UNLOAD_ROT_TEX": 1, "_B_LOAD_POS_TWO_TEX": 0}
     return {
         "format": "SideFX Labs VAT 3.0, Soft-Body Deformation (constant topology)",
         "engine": engine.value, "unit": unit, "texture_format": fmt.value,
-        "frames": layout.frames, "fps": anim.fps, "vertices": int(anim.points.shape[1]),
+        "frames": layout.frames, "fps": fps, "vertices": int(anim.points.shape[1]),
         "time_codes": [float(anim.time_codes[0]), float(anim.time_codes[-1])],
         "texture": {"width": layout.width, "height": layout.height, "rows_per_frame": layout.rows_per_frame,
                     "position_rgb": "offset from the mesh (first frame)" + (

@@ -21,7 +21,7 @@ def _page(tmp_path, *, glb: bytes | None = None):
     if glb is None:
         glb = garment_glb(anim, fit_morph_basis(anim.points, max_error=1e-3), chain_body(t=48), "test")
     page = tmp_path / "preview.html"
-    page.write_text(preview_html(glb, title="patch", fps=24.0, first_time_code=1001.0,
+    page.write_text(preview_html(glb, title="patch", times=anim.times, time_codes=anim.time_codes,
                                  track=anim.points.mean(axis=1), floor=0.0), encoding="utf-8")
     return page
 
