@@ -45,6 +45,10 @@ SETTINGS = {
     "40x3, no self-contact": {"self_contact": False},
     "40x3, 3000 faces": {"collider_faces": 3000},
     "40x3, full body": {"collider_faces": None},
+    "40x3, full body, no self-contact": {"collider_faces": None, "self_contact": False},
+    "Style3D 40x3, full body": {"solver": "style3d", "collider_faces": None},
+    "Style3D 10x10, full body": {"solver": "style3d", "substeps": 10, "iterations": 10, "collider_faces": None},
+    "Style3D 40x3, full body, no self-contact": {"solver": "style3d", "collider_faces": None, "self_contact": False},
 }
 DEFAULT = "default 40x3, 6000 faces"
 

@@ -38,6 +38,7 @@ __all__ = [
     "SimResult",
     "SimulationError",
     "ColliderKind",
+    "SolverKind",
     "Collider",
     "make_collider",
     "simulate",
@@ -74,6 +75,20 @@ class ColliderKind(str, Enum):
     CLOTH = "cloth"
     """A zero-density cloth mesh met through VBD particle self-contact: friction sees the
     body standing still (the earlier collider, kept for comparison)."""
+
+
+class SolverKind(str, Enum):
+    """Which Newton cloth solver integrates the garment (:attr:`SimConfig.solver`)."""
+
+    VBD = "vbd"
+    """Vertex block descent (``SolverVBD``): the default; its energy is the one the physics
+    objective writes out (Neo-Hookean membrane, dihedral bending against the rest angle)."""
+    STYLE3D = "style3d"
+    """Projective dynamics with PCG (``SolverStyle3D``), for comparison. Its membrane is
+    anisotropic (weft, warp, shear all set to ``stretch_stiffness``) and its bending is the
+    cotangent form against a flat rest, so the same numbers are a near, not an equal,
+    material. It needs the mesh-shape collider; ``iterations`` are its non-linear
+    iterations (10 PCG iterations each)."""
 
 
 @dataclass(frozen=True)
@@ -129,6 +144,10 @@ class SimConfig:
     collider: ColliderKind = ColliderKind.MESH_SHAPE
     """How the body collides (see :class:`ColliderKind` for the measurements); a string
     ("mesh_shape", "cloth") is accepted."""
+    solver: SolverKind = SolverKind.VBD
+    """The cloth solver (see :class:`SolverKind`); a string ("vbd", "style3d") is accepted.
+    Left out of :meth:`to_json` when VBD, so data sets made before the choice existed keep
+    their digests."""
     collider_faces: int | None = 6000
     """Decimate the body collider to about this many triangles (needs fast-simplification);
     None uses the full body mesh."""
@@ -159,10 +178,21 @@ class SimConfig:
         except ValueError:
             raise SimulationError(f"SimConfig.collider must be one of {[k.value for k in ColliderKind]}, "
                                   f"got {self.collider!r}") from None
+        try:
+            object.__setattr__(self, "solver", SolverKind(self.solver))
+        except ValueError:
+            raise SimulationError(f"SimConfig.solver must be one of {[k.value for k in SolverKind]}, "
+                                  f"got {self.solver!r}") from None
+        if self.solver is SolverKind.STYLE3D and self.collider is not ColliderKind.MESH_SHAPE:
+            raise SimulationError("SimConfig.solver='style3d' needs collider='mesh_shape' (Style3D drops "
+                                  "zero-mass particles, so a cloth collider never touches the garment)")
 
     def to_json(self) -> dict:
         """Plain JSON-able fields (for manifests and shards)."""
-        return {**dataclasses.asdict(self), "collider": self.collider.value}
+        out = {**dataclasses.asdict(self), "collider": self.collider.value, "solver": self.solver.value}
+        if self.solver is SolverKind.VBD:
+            del out["solver"]
+        return out
 
 
 @dataclass(frozen=True)
@@ -440,6 +470,32 @@ def make_collider(body: BodyModel, betas: np.ndarray, faces: int | None) -> Coll
 # --------------------------------------------------------------------------- simulation
 
 
+def _add_style3d_cloth(newton, wp, builder, rest32: np.ndarray, faces: np.ndarray, config: SimConfig) -> None:
+    """The garment as a Style3D cloth whose rest metric is the rest garment's own.
+
+    Style3D takes its rest metric from 2D panel coordinates. The garment has no pattern
+    here, so each triangle is laid flat on its own (its rest edge lengths kept exactly):
+    panel vertices (3M, 2), panel triangles ``arange(3M)``.
+    """
+    newton.solvers.SolverStyle3D.register_custom_attributes(builder)
+    tri = rest32[faces].astype(np.float64)  # (M, 3, 3)
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    l1 = np.linalg.norm(e1, axis=1)
+    u = e1 / np.maximum(l1, 1e-12)[:, None]
+    x2 = np.einsum("ij,ij->i", e2, u)
+    y2 = np.linalg.norm(e2 - x2[:, None] * u, axis=1)
+    panel = np.zeros((faces.shape[0], 3, 2))
+    panel[:, 1, 0] = l1
+    panel[:, 2, 0], panel[:, 2, 1] = x2, y2
+    k, kb = config.stretch_stiffness, config.bend_stiffness
+    newton.solvers.style3d.add_cloth_mesh(
+        builder, pos=wp.vec3(0.0, 0.0, 0.0), rot=wp.quat_identity(), vel=wp.vec3(0.0, 0.0, 0.0),
+        vertices=rest32.tolist(), indices=faces.ravel().tolist(), density=config.density,
+        panel_verts=panel.reshape(-1, 2).tolist(), panel_indices=np.arange(3 * faces.shape[0]).tolist(),
+        tri_aniso_ke=wp.vec3(k, k, k), edge_aniso_ke=wp.vec3(kb, kb, kb), tri_kd=config.stretch_damping,
+        edge_kd=config.bend_damping, particle_radius=config.particle_radius, label="garment")
+
+
 def _check_inputs(garment_verts, garment_faces, poses, transl):
     garment_verts = np.asarray(garment_verts, dtype=np.float64)
     garment_faces = np.asarray(garment_faces, dtype=np.int64)
@@ -491,8 +547,12 @@ def simulate(body: BodyModel, betas: np.ndarray, garment_verts: np.ndarray, garm
                   tri_ke=config.stretch_stiffness, tri_ka=config.stretch_stiffness,
                   tri_kd=config.stretch_damping, edge_ke=config.bend_stiffness, edge_kd=config.bend_damping,
                   particle_radius=config.particle_radius)
-    builder.add_cloth_mesh(vertices=[wp.vec3(*p) for p in rest32], indices=garment_faces.ravel().tolist(),
-                           density=config.density, label="garment", **common)
+    style3d = config.solver is SolverKind.STYLE3D
+    if style3d:
+        _add_style3d_cloth(newton, wp, builder, rest32, garment_faces, config)
+    else:
+        builder.add_cloth_mesh(vertices=[wp.vec3(*p) for p in rest32], indices=garment_faces.ravel().tolist(),
+                               density=config.density, label="garment", **common)
     mesh_shape = config.collider is ColliderKind.MESH_SHAPE
     if mesh_shape:
         body_mesh = newton.Mesh(body_col[0], collider.faces.ravel(), compute_inertia=False)
@@ -524,12 +584,19 @@ def simulate(body: BodyModel, betas: np.ndarray, garment_verts: np.ndarray, garm
         pipeline = newton.CollisionPipeline(model, soft_contact_gap=config.contact_gap)
         contacts = pipeline.contacts()
         body_points, body_velocities = body_mesh.mesh.points, body_mesh.mesh.velocities
-    solver = newton.solvers.SolverVBD(
-        model, iterations=config.iterations,
-        particle_enable_self_contact=config.self_contact,
-        particle_self_contact_margin=config.contact_margin,
-        particle_self_contact_gap=config.contact_gap,
-        **_rest_contact_filters(rest, garment_faces, model.edge_indices.numpy(), config.rest_contact_exclusion))
+    if style3d:
+        solver = newton.solvers.SolverStyle3D(
+            model, config=newton.solvers.SolverStyle3D.Config(iterations=config.iterations, linear_iterations=10))
+        solver.collision.radius = config.contact_margin
+        if not config.self_contact:  # body contact stays: it is the same Collision's last kernel
+            solver.collision.stiff_vf = solver.collision.stiff_ee = solver.collision.stiff_ef = 0.0
+    else:
+        solver = newton.solvers.SolverVBD(
+            model, iterations=config.iterations,
+            particle_enable_self_contact=config.self_contact,
+            particle_self_contact_margin=config.contact_margin,
+            particle_self_contact_gap=config.contact_gap,
+            **_rest_contact_filters(rest, garment_faces, model.edge_indices.numpy(), config.rest_contact_exclusion))
     states = [model.state(), model.state()]
     control = model.control()
 
