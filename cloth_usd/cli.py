@@ -63,6 +63,9 @@ def _parser() -> argparse.ArgumentParser:
                    help="a learned frame that is not a garment (NaN, torn, far from the body) is an error "
                         "(exit 2, nothing written) instead of being replaced by the next safer tier")
 
+    from .garments.command import register as register_garment
+
+    register_garment(add_command)
     d = add_command("doctor", help="check the body model file(s) and the runtime")
     d.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
     d.add_argument("--gender", default="neutral", help="file to pick inside a folder: neutral, female, male")
@@ -353,6 +356,12 @@ def _doctor(args: argparse.Namespace) -> int:
     return 0 if all(c.ok for c in checks) else 1
 
 
+def _garment(args: argparse.Namespace) -> int:
+    from .garments.command import run
+
+    return run(args)
+
+
 def _body(path: str | None):
     from .core.body import load_body_model
 
@@ -558,7 +567,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         commands = {"inspect": _inspect, "bake": _bake, "doctor": _doctor, "render": _render, "batch": _batch,
                     "datagen": _datagen,
                     "train": _train, "export": _export, "evaluate": _evaluate,
-                    "import-motion": _import_motion, "train-garment": _train_garment, "convert": _convert, "preview": _preview}
+                    "import-motion": _import_motion, "garment": _garment, "train-garment": _train_garment, "convert": _convert, "preview": _preview}
         return commands[args.command](args)
     except ClothUsdError as exc:
         if args.verbose:

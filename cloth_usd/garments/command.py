@@ -1,0 +1,98 @@
+"""``cloth-usd garment make``: the command's arguments and what it does (imported by
+:mod:`cloth_usd.cli`, cheaply: the simulator is imported only when a garment is made)."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from typing import Callable
+
+__all__ = ["register", "run"]
+
+
+def register(add_command: Callable[..., argparse.ArgumentParser]) -> None:
+    """Add the ``garment`` command (``garment make``, ``garment presets``) to the CLI."""
+    from .designs import DESIGNS
+
+    g = add_command("garment", help="make a garment from a sewing pattern, sewn and draped on a body (Newton)")
+    sub = g.add_subparsers(dest="garment_command", required=True, metavar="ACTION")
+    mk = sub.add_parser("make", help="cut a T-shirt, dress or trousers for a body, sew and drape it, write a "
+                                     "garment USD file (the T-posed character and the garment with UVs)")
+    mk.add_argument("category", choices=list(DESIGNS), help="garment category")
+    mk.add_argument("-o", "--output", required=True, help="garment file to write (.usda, .usdc, .usd)")
+    mk.add_argument("--betas", type=float, nargs="+", default=[], metavar="B",
+                    help="body shape coefficients (up to 10; default zeros)")
+    mk.add_argument("--preset", help="a named cut (see `cloth-usd garment presets`)")
+    mk.add_argument("--param", action="append", default=[], metavar="NAME=VALUE",
+                    help="set one design parameter (repeatable; see `cloth-usd garment presets`)")
+    mk.add_argument("--vertices", type=int, default=None,
+                    help="target pattern vertex count (default 3500)")
+    mk.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
+    mk.add_argument("--report", metavar="JSON", help="also write the measurements and figures as JSON")
+    mk.add_argument("--force", action="store_true", help="replace an existing output file")
+    sub.add_parser("presets", help="list the named cuts and every design parameter with its default")
+
+
+def _parse_params(items: list[str]) -> dict[str, str]:
+    from ..errors import ArgumentError
+
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise ArgumentError(f"--param {item}: expected NAME=VALUE")
+        out[name.strip()] = value.strip()
+    return out
+
+
+def _presets() -> int:
+    import dataclasses
+
+    from .designs import DESIGNS, PRESETS
+
+    for category, cls in DESIGNS.items():
+        sys.stdout.write(f"{category}\n  parameters: " + ", ".join(
+            f"{f.name}={f.default}" for f in dataclasses.fields(cls)) + "\n")
+        for name, values in PRESETS[category].items():
+            text = " ".join(f"{k}={v}" for k, v in values.items()) or "(defaults)"
+            sys.stdout.write(f"  --preset {name:14s} {text}\n")
+    return 0
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``cloth-usd garment ...``; returns the exit code."""
+    if args.garment_command == "presets":
+        return _presets()
+    import numpy as np
+
+    from ..core.body import load_body_model
+    from ..errors import ArgumentError
+    from ..usd.garment_file import write_garment_file
+    from ..usd.write import check_output_path
+    from .designs import design_from_params
+    from .make import DEFAULT_VERTICES, body_joints, make_garment
+
+    if len(args.betas) > 10 or not all(np.isfinite(args.betas)):
+        raise ArgumentError(f"--betas: at most 10 finite values, got {len(args.betas)}")
+    betas = np.zeros(10)
+    betas[: len(args.betas)] = args.betas
+    params = _parse_params(args.param)
+    design_from_params(args.category, args.preset, params)  # a bad parameter fails before any work
+    check_output_path(args.output, force=args.force)
+    body = load_body_model(args.body_model)
+    made = make_garment(args.category, betas, body=body, preset=args.preset, params=params,
+                        target_vertices=args.vertices or DEFAULT_VERTICES)
+    report = {**made.report(), "preset": args.preset, "betas": [float(b) for b in betas],
+              "measurements": made.measurements.to_json()}
+    path = write_garment_file(args.output, points=made.points, faces=made.faces, st=made.st,
+                              st_indices=made.st_indices, category=args.category, betas=betas,
+                              joints=body_joints(body, betas), custom={"garment": json.dumps(report)},
+                              force=args.force)
+    if args.report:
+        with open(args.report, "w", encoding="utf-8") as f:
+            json.dump(report, f, indent=2)
+    sys.stdout.write(f"wrote {path}: {args.category} {args.preset or ''} {report['vertices']} vertices, "
+                     f"{report['panels']} panels, edge stretch vs pattern p99 {report['stretch_p99']:.3f} "
+                     f"(max {report['stretch_max']:.3f}), {report['seconds']:.0f} s\n")
+    return 0
