@@ -132,7 +132,7 @@ def vat_errors(result: VatResult, anim: MeshAnimation) -> np.ndarray:
     from .gltf import read_accessor, read_glb
     from .vat import decode_vat, read_exr, read_png16
 
-    files = dict(zip(("mesh", "position", "normal", "data"), result.files))
+    files = dict(zip(("mesh", "position", "rotation", "data"), result.files))
     doc, blob = read_glb(files["mesh"].read_bytes())
     attrs = doc["meshes"][0]["primitives"][0]["attributes"]
     rest = read_accessor(doc, blob, attrs["POSITION"]).astype(np.float64)

@@ -10,8 +10,9 @@ rule comes from and which material settings to use):
   half-float EXR, or ``(offset - bound_min) / (bound_max - bound_min)`` in a 16-bit PNG.
   A holds the normal, compressed ("Use Compressed Normals"): a sphere-map pair of 5-bit
   codes, ``(hi * 32 + lo) / 1024``.
-- a **normal texture** of the same layout, ``normal * 0.5 + 0.5`` in RGB, for materials
-  that read normals uncompressed;
+- a **rotation texture** of the same layout (the materials' default, "Use Compressed
+  Normals" off): per vertex and frame the quaternion (x, y, z, w) that turns (0, 1, 0)
+  into the normal; raw in EXR, ``q * 0.5 + 0.5`` in PNG;
 - the **mesh** (a .glb) at the first frame, its second UV channel (``TEXCOORD_1``, the
   engine's UV1) the centre of each vertex's texel in frame 0 (glTF's ``v`` runs down);
 - a **JSON** of the material data: frame count, frames per second, the bounds (snapped
@@ -46,6 +47,7 @@ from .gltf import GltfBuilder, _ARRAY_BUFFER, _FLOAT, _vertex_normals, glb_bytes
 _log = logging.getLogger(__name__)
 
 __all__ = ["Engine", "TextureFormat", "VatLayout", "VatResult", "vat_layout", "encode_normals", "decode_normals",
+           "normal_quaternions", "rotate_up",
            "write_vat", "decode_vat", "write_png16", "read_png16", "ENGINE_AXES"]
 
 
@@ -131,6 +133,24 @@ def decode_normals(alpha: np.ndarray) -> np.ndarray:
     n = np.stack([-e[..., 0] * r, 1.0 - s / 2.0, e[..., 1] * r], axis=-1)
     n = np.clip(n, -1.0, 1.0)
     return n / np.maximum(np.linalg.norm(n, axis=-1, keepdims=True), 1e-12)
+
+
+def normal_quaternions(normals: np.ndarray) -> np.ndarray:
+    """(..., 3) unit normals -> (..., 4) unit quaternions (x, y, z, w): the shortest turn
+    from (0, 1, 0) to each normal (half a turn about x for a normal pointing down)."""
+    n = np.asarray(normals, dtype=np.float64)
+    q = np.stack([n[..., 2], np.zeros(n.shape[:-1]), -n[..., 0], 1.0 + n[..., 1]], axis=-1)
+    length = np.linalg.norm(q, axis=-1, keepdims=True)
+    return np.where(length > 1e-6, q / np.maximum(length, 1e-12), [1.0, 0.0, 0.0, 0.0])
+
+
+def rotate_up(q: np.ndarray) -> np.ndarray:
+    """The stock shader's normal from a rotation sample: (0, 1, 0) turned by ``q`` (..., 4)."""
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.maximum(np.linalg.norm(q, axis=-1, keepdims=True), 1e-12)
+    v = np.broadcast_to([0.0, 1.0, 0.0], q.shape[:-1] + (3,))
+    t = np.cross(q[..., :3], v)
+    return v + 2.0 * np.cross(q[..., :3], t + v * q[..., 3:4])
 
 
 def _frame_normals(points: np.ndarray, triangles: np.ndarray) -> np.ndarray:
@@ -224,7 +244,7 @@ def read_exr(path: Path) -> np.ndarray:
 
 def vat_file_names(stem: str, fmt: TextureFormat) -> dict[str, str]:
     ext = "exr" if fmt is TextureFormat.EXR else "png"
-    return {"mesh": f"{stem}_mesh.glb", "position": f"{stem}_pos.{ext}", "normal": f"{stem}_norm.{ext}",
+    return {"mesh": f"{stem}_mesh.glb", "position": f"{stem}_pos.{ext}", "rotation": f"{stem}_rot.{ext}",
             "data": f"{stem}_data.json"}
 
 
@@ -267,7 +287,8 @@ def write_vat(anim: MeshAnimation, out_dir: str | os.PathLike, *, engine: Engine
     if hdr:
         position = texture(offsets, codes / 1024.0)
         _write_exr(out / names["position"], position)
-        _write_exr(out / names["normal"], texture(normals * 0.5 + 0.5, np.ones((t, n))))
+        quats = normal_quaternions(normals)
+        _write_exr(out / names["rotation"], texture(quats[..., :3], quats[..., 3]))
     else:
         unit = (offsets - bound_min) / (bound_max - bound_min)
         position = texture(unit, np.zeros((t, n)))
@@ -276,8 +297,9 @@ def write_vat(anim: MeshAnimation, out_dir: str | os.PathLike, *, engine: Engine
         rows = np.arange(t)[:, None] * layout.rows_per_frame + np.arange(n) // layout.width
         rgba[rows, np.broadcast_to(np.arange(n) % layout.width, rows.shape), 3] = alpha
         write_png16(out / names["position"], rgba)
-        normal_tex = texture(normals * 0.5 + 0.5, np.ones((t, n)))
-        write_png16(out / names["normal"], np.clip(np.rint(normal_tex * 65535.0), 0, 65535).astype(np.uint16))
+        quats = normal_quaternions(normals) * 0.5 + 0.5
+        rotation = texture(quats[..., :3], quats[..., 3])
+        write_png16(out / names["rotation"], np.clip(np.rint(rotation * 65535.0), 0, 65535).astype(np.uint16))
     write_atomic(out / names["mesh"], glb_bytes(*_vat_mesh(anim, points[0], layout)))
     data = _vat_data(anim, layout, engine, fmt, bound_min, bound_max, lo, hi, names, extras)
     write_atomic(out / names["data"], (json.dumps(data, indent=2) + "\n").encode())
@@ -330,20 +352,23 @@ def _vat_data(anim, layout, engine, fmt, bound_min, bound_max, lo, hi, names, ex
                     "position_rgb": "offset from the mesh (first frame)" + (
                         " [raw]" if fmt is TextureFormat.EXR else " (x - Bound Min) / (Bound Max - Bound Min)"),
                     "position_alpha": "compressed normal (hi * 32 + lo) / 1024",
-                    "normal_rgb": "normal * 0.5 + 0.5", "uv_channel": 1},
+                    "rotation_rgba": "quaternion (x, y, z, w) turning (0, 1, 0) to the normal" + (
+                        " [raw]" if fmt is TextureFormat.EXR else ", q * 0.5 + 0.5"), "uv_channel": 1},
         "offset_bounds": {"min": [float(v) for v in lo], "max": [float(v) for v in hi], "unit": unit},
         "material": material, "unity_material": unity, "files": names, **({"source": extras} if extras else {}),
     }
 
 
-def decode_vat(texture: np.ndarray, uv1: np.ndarray, rest: np.ndarray, data: dict, frame: int
-               ) -> tuple[np.ndarray, np.ndarray]:
+def decode_vat(texture: np.ndarray, uv1: np.ndarray, rest: np.ndarray, data: dict, frame: int, *,
+               rotation: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """What the stock soft-body shader computes for one frame, back in glTF axes and metres:
     ``(positions (N, 3), normals (N, 3))``. A reference for tests and measurements.
 
     Args:
         texture: (H, W, 4) float position texture as sampled (PNG values / 65535).
         uv1: (N, 2) glTF UV1 of the mesh; rest: (N, 3) mesh positions [m].
+        rotation: the rotation texture, as sampled; normals come from it when given
+            ("Use Compressed Normals" off), else from the position texture's alpha.
     """
     engine = Engine(data["engine"])
     axes, scale = ENGINE_AXES[engine]
@@ -365,6 +390,11 @@ def decode_vat(texture: np.ndarray, uv1: np.ndarray, rest: np.ndarray, data: dic
     lo = np.array([m[f"Bound Min {a}"] for a in "XYZ"])
     hi = np.array([m[f"Bound Max {a}"] for a in "XYZ"])
     offset = sample[:, :3] if raw else sample[:, :3] * (hi - lo) + lo
-    normal = decode_normals(sample[:, 3])
+    if rotation is None:
+        normal = decode_normals(sample[:, 3])
+    else:
+        q = rotation[rows, cols].astype(np.float64)
+        normal = rotate_up(q if raw else (q - 0.5) * 2.0)
+        normal /= np.maximum(np.linalg.norm(normal, axis=-1, keepdims=True), 1e-12)
     back = np.linalg.inv(axes)
     return rest + (offset / scale) @ back.T, normal @ back.T

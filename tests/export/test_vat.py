@@ -38,7 +38,7 @@ def test_layout_wraps_rows_and_uv_addresses_texel_centres():
 def test_files_mesh_and_json(tmp_path, patch):
     result = write_vat(patch, tmp_path / "vat", fmt=TextureFormat.PNG16)
     names = sorted(p.name for p in (tmp_path / "vat").iterdir())
-    assert names == ["Patch_data.json", "Patch_mesh.glb", "Patch_norm.png", "Patch_pos.png"]
+    assert names == ["Patch_data.json", "Patch_mesh.glb", "Patch_pos.png", "Patch_rot.png"]
     data = json.loads((tmp_path / "vat" / "Patch_data.json").read_text())
     assert data["material"]["Frame Count"] == 24 and data["material"]["Houdini FPS"] == 24.0
     assert data["texture"] == {**data["texture"], "width": 36, "height": 24, "rows_per_frame": 1}
@@ -83,16 +83,30 @@ def test_compressed_normals_within_the_5_bit_quantisation():
     assert angle[n[:, 1] > -0.5].max() < 8.0 and angle[-4:-1].max() < 8.0
 
 
-def test_decoded_normals_follow_the_surface(tmp_path, patch):
-    """The cloth patch faces +z in glTF; decoded normals come back as +z (either side)."""
-    result = write_vat(patch, tmp_path / "vat", engine=Engine.UNITY)
+@pytest.mark.parametrize("fmt, degrees", [(TextureFormat.EXR, 0.05), (TextureFormat.PNG16, 0.01)])
+def test_decoded_normals_are_the_surface_normals(tmp_path, fmt, degrees):
+    """From the rotation texture, to the precision of the format; compressed (position
+    alpha), to 5 bits a code. The patch waves, so its normals change over time."""
+    from cloth_usd.export.gltf import _vertex_normals
     from cloth_usd.export.vat import read_exr
 
+    patch = grid_animation(t=12)
+    result = write_vat(patch, tmp_path / "vat", engine=Engine.UNREAL, fmt=fmt)
     doc, blob = read_glb(result.files[0].read_bytes())
-    attrs = doc["meshes"][0]["primitives"][0]["attributes"]
-    _, normals = decode_vat(read_exr(result.files[1]), read_accessor(doc, blob, attrs["TEXCOORD_1"]),
-                            patch.points[0], result.data, 0)
-    assert np.abs(normals[:, 2]).min() > 0.9
+    uv1 = read_accessor(doc, blob, doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_1"])
+
+    def load(path):
+        return read_exr(path) if fmt is TextureFormat.EXR else read_png16(path) / 65535.0
+
+    position, rotation = load(result.files[1]), load(result.files[2])
+    for frame in (0, 5, 11):
+        want = _vertex_normals(patch.points[frame], patch.triangles)
+        _, exact = decode_vat(position, uv1, patch.points[0], result.data, frame, rotation=rotation)
+        _, packed = decode_vat(position, uv1, patch.points[0], result.data, frame)
+        angle = np.degrees(np.arccos(np.clip(np.sum(exact * want, axis=1), -1, 1)))
+        assert angle.max() < degrees
+        angle = np.degrees(np.arccos(np.clip(np.sum(packed * want, axis=1), -1, 1)))
+        assert angle.max() < 6.0
 
 
 def test_existing_files_need_force(tmp_path, patch):
