@@ -76,8 +76,8 @@ class GltfBuilder:
         if normalized:
             entry["normalized"] = True
         if bounds:
-            entry["min"] = [_number(v) for v in flat.min(axis=0)]
-            entry["max"] = [_number(v) for v in flat.max(axis=0)]
+            entry["min"] = [v.item() for v in flat.min(axis=0)]
+            entry["max"] = [v.item() for v in flat.max(axis=0)]
         self.doc["accessors"].append(entry)
         return len(self.doc["accessors"]) - 1
 
@@ -109,11 +109,6 @@ class GltfBuilder:
             if not doc.get(key):
                 doc.pop(key, None)
         return doc, bytes(self.blob)
-
-
-def _number(v) -> float | int:
-    v = v.item()
-    return v
 
 
 def add_garment(builder: GltfBuilder, anim: MeshAnimation, basis: MorphBasis, *, material: int,
