@@ -145,3 +145,42 @@ def test_unbaked_scene_and_lost_scene_are_one_line(baked, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "its scene" in err and "does not exist" in err and err.count("\n") == 1
     assert main(["convert", str(moved), "-o", str(tmp_path / "y.glb"), "--scene", str(WALK)]) == 0
+
+
+def test_face_varying_uvs_survive_on_the_sample(tmp_path):
+    """The sample shirt given face-varying UVs with a seam: the glb keeps them, splitting
+    the seam's points, and every split vertex moves with its point."""
+    from pxr import Sdf, Usd, UsdGeom, Vt
+
+    from cloth_usd.export.gltf import read_accessor
+
+    scene = tmp_path / "scene.usda"
+    scene.write_text(WALK.read_text())
+    stage = Usd.Stage.Open(str(scene))
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Character/Tshirt"))
+    points = np.asarray(mesh.GetPointsAttr().Get(), dtype=np.float64)
+    indices = np.asarray(mesh.GetFaceVertexIndicesAttr().Get())
+    counts = np.asarray(mesh.GetFaceVertexCountsAttr().Get())
+    face = np.repeat(np.arange(counts.size), counts)
+    centroid_z = np.bincount(face, weights=points[indices, 2]) / counts
+    st = np.column_stack([points[indices, 0] + 0.5, points[indices, 1] - 0.5])
+    st[:, 0] += np.where(centroid_z[face] > np.median(centroid_z), 1.0, 0.0)  # front and back: two islands
+    primvar = UsdGeom.PrimvarsAPI(mesh.GetPrim()).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                                 UsdGeom.Tokens.faceVarying)
+    primvar.Set(Vt.Vec2fArray.FromNumpy(st.astype(np.float32)))
+    stage.GetRootLayer().Save()
+    assert main(["bake", str(scene), "-o", str(tmp_path / "c.usdc"), "--shot", str(tmp_path / "s.usda"),
+                 "--frames", "1001:1010", "--no-progress"]) == 0
+    assert main(["convert", str(tmp_path / "s.usda"), "-o", str(tmp_path / "s.glb"), "--max-error", "0.1"]) == 0
+    anim, _ = read_baked(tmp_path / "s.usda")
+    doc, blob = read_glb((tmp_path / "s.glb").read_bytes())
+    uv = read_accessor(doc, blob, doc["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"])
+    assert anim.vertex_map is not None and points.shape[0] < uv.shape[0] == anim.vertex_map.shape[0]
+    assert set(np.unique(np.floor(uv[:, 0]))) == {0.0, 1.0}  # both islands, u as given
+    shot = Usd.Stage.Open(str(tmp_path / "s.usda"))
+    cache = np.asarray(UsdGeom.Mesh(shot.GetPrimAtPath("/Character/Tshirt")).GetPointsAttr().Get(1005),
+                       dtype=np.float64)
+    shown = play_gltf(doc, blob, 4)["Tshirt"]
+    assert np.linalg.norm(shown - cache[anim.vertex_map], axis=1).max() < 0.1e-3 + 2e-6  # metres, Y-up stage
+    (report,) = validate(tmp_path / "s.glb")
+    assert report["errors"] == 0 and report["warnings"] == 0, report["messages"]
