@@ -66,6 +66,11 @@ function start() {
     camera.position.add(moved);
   }
 
+  // The mixer loops: a time at the clip's very end would wrap to its start.
+  function seek(f) {
+    if (mixer) mixer.setTime(Math.min(times[f], times[frames - 1] - 1e-4));
+  }
+
   function show(f) {
     frame = Math.max(0, Math.min(frames - 1, f));
     slider.value = String(frame);
@@ -81,20 +86,23 @@ function start() {
     playing = false;
     play.textContent = 'Play';
     const f = Number(slider.value);
-    if (mixer) mixer.setTime(times[f]);
+    seek(f);
     show(f);
   });
   window.addEventListener('resize', resize);
   resize();
 
   new GLTFLoader().parse(bytes.buffer, '', (gltf) => {
+    // Bounding spheres are computed once, at the rest pose: a skinned body that walks away
+    // from it would be culled. The scene is one character: draw it always.
+    gltf.scene.traverse((o) => { o.frustumCulled = false; });
     scene.add(gltf.scene);
     const box = new Box3().setFromObject(gltf.scene);
     const size = box.getSize(new Vector3());
     const height = Math.max(size.y, 0.5);
     const c = track[0];
     controls.target.set(c[0], c[1], c[2]);
-    camera.position.set(c[0] + height * 0.9, c[1] + height * 0.25, c[2] + height * 2.1);
+    camera.position.set(c[0] + height * 0.9, c[1] + height * 0.3, c[2] + height * 2.3);
     const grid = new GridHelper(20, 40, 0x9aa0a6, 0xc4c8cc);
     grid.position.y = cfg.floor;
     scene.add(grid);
@@ -104,6 +112,16 @@ function start() {
       action = mixer.clipAction(gltf.animations[0]);
       action.setLoop(LoopRepeat, Infinity);
       action.play();
+    }
+    // #frame=N (1-based, as the timeline shows it): go to that frame, paused, once the
+    // first frame is drawn.
+    const asked = /frame=(\d+)/.exec(window.location.hash);
+    function jump() {
+      playing = false;
+      play.textContent = 'Play';
+      const f = Math.max(0, Math.min(frames - 1, Number(asked[1]) - 1));
+      seek(f);
+      show(f);
     }
     show(0);
     renderer.setAnimationLoop((now) => {
@@ -120,6 +138,7 @@ function start() {
       if (document.body.dataset.state === 'loading') {
         document.body.dataset.state = 'ready';
         console.log('cloth-usd preview: ready');
+        if (asked) jump();
       }
     });
   }, (err) => fail(`cannot read the embedded glTF: ${err && err.message ? err.message : err}`));

@@ -98,8 +98,11 @@ def write_preview(source: str | os.PathLike, output: str | os.PathLike, *, max_e
         lowest = min(lowest, float(body.rest_vertices[:, 1].min() - body.rest_joints[0, 1]
                                    + body.root_translation[:, 1].min()))
     title = f"{Path(os.fspath(source)).name}: {anim.name}, {anim.points.shape[0]} frames at {anim.fps:g} fps"
-    page = preview_html(glb, title=title, times=anim.times, time_codes=anim.time_codes,
-                        track=anim.points.mean(axis=1), floor=float(lowest))
+    track = anim.points.mean(axis=1)
+    if body is not None:  # aim below the garment's centre, nearer the body's
+        track = track - [0.0, 0.25, 0.0]
+    page = preview_html(glb, title=title, times=anim.times, time_codes=anim.time_codes, track=track,
+                        floor=float(lowest))
     write_atomic(out, page.encode("utf-8"))
     err = vertex_errors(basis.reconstruct(), anim.points)
     return PreviewResult(path=out, frames=anim.points.shape[0], targets=int(basis.targets.shape[0]),

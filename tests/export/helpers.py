@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -152,17 +153,17 @@ CHROMIUM_FLAGS = ("--headless", "--no-sandbox", "--disable-gpu", "--enable-unsaf
 
 
 def chromium(page: Path, work: Path, *, screenshot: Path | None = None, size: str = "960,720",
-             budget_ms: int = 4000) -> subprocess.CompletedProcess:
-    """Run headless chromium on a local page: the DOM on stdout (``--dump-dom``), or a
-    screenshot; console messages are on stderr. Skips when chromium is not installed."""
+             budget_ms: int = 4000, fragment: str = "") -> subprocess.CompletedProcess:
+    """Run headless chromium on a local page (``fragment``: e.g. ``#frame=3``): the DOM on
+    stdout (``--dump-dom``), or a screenshot; console messages are on stderr. Skips when
+    chromium is not installed."""
     exe = shutil.which("chromium")
     if exe is None:
         pytest.skip("chromium is not installed (bash scripts/setup_web.sh installs Debian's)")
-    profile = work / f"profile-{'shot' if screenshot else 'dom'}"
-    profile.mkdir()
+    profile = Path(tempfile.mkdtemp(prefix="profile-", dir=work))
     what = [f"--screenshot={screenshot}"] if screenshot else ["--dump-dom"]
     return subprocess.run([exe, *CHROMIUM_FLAGS, f"--user-data-dir={profile}", f"--window-size={size}",
-                           f"--virtual-time-budget={budget_ms}", *what, page.resolve().as_uri()],
+                           f"--virtual-time-budget={budget_ms}", *what, page.resolve().as_uri() + fragment],
                           capture_output=True, text=True, timeout=180)
 
 
@@ -171,3 +172,13 @@ def console_lines(stderr: str) -> list[str]:
     import re
 
     return [m.group(1) for m in re.finditer(r':CONSOLE:\d+\] "(.*)", source: ', stderr)]
+
+
+def pixel_fractions(png: Path) -> tuple[float, float]:
+    """Fractions of a screenshot's pixels in the garment's blue and in the body's skin tone
+    (the page's background and grid are grey)."""
+    import matplotlib.image
+
+    rgb = matplotlib.image.imread(str(png))[..., :3].astype(np.float64)
+    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
+    return float(np.mean((b > r + 0.15) & (b > g + 0.05))), float(np.mean((r > b + 0.1) & (r > 0.35)))

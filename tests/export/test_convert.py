@@ -15,7 +15,7 @@ from cloth_usd.cli import main
 from cloth_usd.core.body import lbs, load_body_model
 from cloth_usd.export.convert import read_baked
 from cloth_usd.export.gltf import _top4, read_glb
-from tests.export.helpers import ROOT, play_gltf, validate
+from tests.export.helpers import ROOT, chromium, pixel_fractions, play_gltf, validate
 
 WALK = ROOT / "samples" / "walk_tshirt" / "scene.usda"
 ZUP = ROOT / "samples" / "walk_tshirt_zup_cm" / "scene.usda"
@@ -119,6 +119,13 @@ def test_preview_page_from_the_cli(baked, tmp_path, capsys):
     assert '"frames": 48' in text and "Tshirt" in text
     assert main(["preview", str(shot), "-o", str(page)]) == 2
     assert "already exists; pass --force" in capsys.readouterr().err
+    # The walk goes 4 m: garment and body are on screen at its start, middle and end (a
+    # body culled by its rest-pose bounds, or the end wrapping to the start, would not be).
+    for frame in (1, 24, 48):
+        png = tmp_path / f"frame{frame}.png"
+        chromium(page, tmp_path, screenshot=png, size="480,360", budget_ms=1500, fragment=f"#frame={frame}")
+        garment, skin = pixel_fractions(png)
+        assert garment > 0.005 and skin > 0.005, (frame, garment, skin)
 
 
 @pytest.mark.parametrize("args, message", [

@@ -13,7 +13,7 @@ import pytest
 from cloth_usd.export.convert import garment_glb
 from cloth_usd.export.pca import fit_morph_basis
 from cloth_usd.export.preview import preview_html
-from tests.export.helpers import ROOT, WEB, chain_body, chromium, console_lines, grid_animation
+from tests.export.helpers import ROOT, WEB, chain_body, chromium, console_lines, grid_animation, pixel_fractions
 
 
 def _page(tmp_path, *, glb: bytes | None = None):
@@ -34,14 +34,6 @@ def test_page_is_self_contained(tmp_path):
     assert "three.js" in text and "SPDX-License-Identifier: MIT" in text
 
 
-def _blue_fraction(png) -> float:
-    import matplotlib.image
-
-    rgb = matplotlib.image.imread(str(png))[..., :3].astype(np.float64)
-    r, g, b = rgb[..., 0], rgb[..., 1], rgb[..., 2]
-    return float(np.mean((b > r + 0.15) & (b > g + 0.05)))  # the garment's blue, not the grey page
-
-
 @pytest.mark.slow
 def test_page_loads_without_errors_and_shows_the_garment(tmp_path):
     page = _page(tmp_path)
@@ -54,7 +46,7 @@ def test_page_loads_without_errors_and_shows_the_garment(tmp_path):
                 and "GPU stall due to ReadPixels" not in line], logged
     shot = tmp_path / "shot.png"
     chromium(page, tmp_path, screenshot=shot)
-    assert _blue_fraction(shot) > 0.01  # the garment is drawn, not a blank canvas
+    assert pixel_fractions(shot)[0] > 0.01  # the garment is drawn, not a blank canvas
 
 
 @pytest.mark.slow
@@ -65,7 +57,7 @@ def test_a_broken_glb_is_reported_on_the_page(tmp_path):
     assert 'data-state="error"' in dom.stdout and "cannot read the embedded glTF" in dom.stdout
     shot = tmp_path / "shot.png"
     chromium(page, tmp_path, screenshot=shot)
-    assert _blue_fraction(shot) < 0.001
+    assert pixel_fractions(shot)[0] < 0.001
 
 
 def test_bundle_is_reproducible(tmp_path):
