@@ -215,12 +215,18 @@ def read_png16(path: Path) -> np.ndarray:
     return rows[:, 1:].copy().view(">u2").reshape(h, w, 4).astype(np.uint16)
 
 
-def _write_exr(path: Path, rgba: np.ndarray) -> Path:
+def _openexr():
+    """The OpenEXR module, or a ClothUsdError that says what to install."""
     try:
         import OpenEXR
     except ImportError:
         raise ClothUsdError("--vat-format exr needs the OpenEXR package: pip install 'cloth-usd[game]' "
                             "(or pass --vat-format png16)") from None
+    return OpenEXR
+
+
+def _write_exr(path: Path, rgba: np.ndarray) -> Path:
+    OpenEXR = _openexr()
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp.exr", dir=path.parent)
     os.close(fd)
     try:
@@ -257,6 +263,8 @@ def write_vat(anim: MeshAnimation, out_dir: str | os.PathLike, *, engine: Engine
         ArgumentError, OutputExistsError: bad folder or files exist without ``force``.
         OutputWriteError: a write failed.
     """
+    if fmt is TextureFormat.EXR:
+        _openexr()  # before any folder is made
     stem = stem or (anim.name.rsplit("/", 1)[-1] or "garment")
     names = vat_file_names(stem, fmt)
     out = check_output_dir(out_dir, force=force, names=names.values())
