@@ -84,7 +84,7 @@ class TrousersDesign:
     hem_ease: float = 0.10
     """Girth ease at the hem (larger: wider, bootcut; smaller: slim)."""
     rise: float = 0.0
-    """Waistline above (+) or below (-) the hip line's usual top at the waist joint."""
+    """Waistline above (+) or below (-) the natural waist (the torso's narrowest girth)."""
     crotch_drop: float = 0.12
     """How far below the body's crotch the seam is cut."""
     waistband: float = 0.04
@@ -120,7 +120,7 @@ PRESETS: dict[str, dict[str, dict[str, Any]]] = {
         "wide": {"hem_ease": 0.30, "thigh_ease": 0.14},
         "shorts": {"length": 0.35, "hem_ease": 0.12},
         "capri": {"length": 0.75, "hem_ease": 0.06},
-        "low-rise": {"rise": -0.06, "waistband": 0.03, "hem_ease": 0.08},
+        "low-rise": {"rise": -0.08, "waistband": 0.03, "hem_ease": 0.08},
     },
 }
 
@@ -175,10 +175,10 @@ def _torso_outline(m: BodyMeasurements, *, hem_y: float, hem_half: float, chest_
     """
     # A flat panel in front of the body must also reach over the shoulder to its top: the
     # shoulder line is raised by about half the shoulder's depth.
-    top = m.shoulder_y + _SHOULDER_LIFT + 0.01
+    top = m.shoulder_y + _SHOULDER_LIFT + 0.03  # the neck is deeper than the shoulder's end
     neck_side = np.array([neck_width, top])
     shoulder = np.array([m.shoulder_x + 0.015, m.shoulder_y + _SHOULDER_LIFT - 0.015])
-    under = np.array([chest_half, m.armpit_y - (0.06 if sleeves else 0.08)])
+    under = np.array([chest_half, m.armpit_y - (0.08 if sleeves else 0.09)])
     centre = np.array([0.0, top - neck_drop])
     if neck_shape == "v":
         neck = line(centre, neck_side)
@@ -307,7 +307,7 @@ def _dress(m: BodyMeasurements, d: DressDesign) -> Pattern:
 
 
 def _trousers(m: BodyMeasurements, d: TrousersDesign) -> Pattern:
-    top_y = m.waist_y + d.rise
+    top_y = m.natural_waist_y + d.rise
     crotch = m.crotch_y - d.crotch_drop
     hem_y = crotch + d.length * (m.ankle_y + 0.02 - crotch)
     leg_x = 0.5 * (0.144 + 0.186) * (m.hip_girth / 1.0083)  # the legs' axis, scaled with the hips
@@ -317,7 +317,7 @@ def _trousers(m: BodyMeasurements, d: TrousersDesign) -> Pattern:
     hip_half = (m.hip_girth + d.hip_ease) / 4.0
     # The top is cut to the waist (less the hips: a low rise) with little ease: the hips below
     # it are wider, and hold the trousers up.
-    top_girth = np.interp(top_y, [m.hip_y, m.waist_y], [m.hip_girth, m.waist_girth])
+    top_girth = np.interp(top_y, [m.hip_y, m.natural_waist_y], [m.hip_girth, m.natural_waist_girth])
     top_half = (top_girth + d.waist_ease) / 4.0
     thigh_half = (m.thigh_girth + d.thigh_ease) / 2.0
     hem_half = hem_girth / 2.0

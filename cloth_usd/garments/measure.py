@@ -37,7 +37,11 @@ class BodyMeasurements:
     """Height of the underarm, where the arm leaves the torso."""
     chest_girth: float
     waist_y: float
+    """Height of the spine1 joint (where a dress's bodice meets its skirt)."""
     waist_girth: float
+    natural_waist_y: float
+    """Height of the narrowest slice of the torso above the waist joint (where trousers sit)."""
+    natural_waist_girth: float
     hip_y: float
     """Height of the widest part of the hips and seat."""
     hip_girth: float
@@ -113,6 +117,8 @@ def measure_body(body: BodyModel, betas: np.ndarray) -> BodyMeasurements:
     girths = [_perimeter(torso_slice(h, 0.4)) for h in candidates]
     hip_y = float(candidates[int(np.argmax(girths))])
     seat = v[(np.abs(y - hip_y) < 0.05) & (np.abs(x) < 0.3)]
+    heights = np.linspace(waist_y, armpit_y - 0.12, 10)
+    waists = [_perimeter(torso_slice(h, torso_half)) for h in heights]
     knee_y, ankle_y = float(j[_L_KNEE, 1]), float(j[_L_ANKLE, 1])
 
     def leg(h: float) -> float:
@@ -124,7 +130,8 @@ def measure_body(body: BodyModel, betas: np.ndarray) -> BodyMeasurements:
         neck_y=float(j[_NECK, 1]), neck_girth=_perimeter(neck[:, [0, 2]]),
         shoulder_y=shoulder_y, shoulder_x=shoulder_jx + 0.03, armpit_y=armpit_y,
         chest_girth=_perimeter(torso_slice(chest_y, torso_half)), waist_y=waist_y,
-        waist_girth=_perimeter(torso_slice(waist_y, torso_half)), hip_y=hip_y, hip_girth=max(girths),
+        waist_girth=_perimeter(torso_slice(waist_y, torso_half)),
+        natural_waist_y=float(heights[int(np.argmin(waists))]), natural_waist_girth=min(waists), hip_y=hip_y, hip_girth=max(girths),
         crotch_y=crotch_y, thigh_girth=leg(crotch_y - 0.04), knee_y=knee_y, knee_girth=leg(knee_y),
         ankle_y=ankle_y, ankle_girth=leg(ankle_y + 0.04), arm_y=arm_y, upper_arm_girth=upper_arm,
         elbow_x=float(j[_L_ELBOW, 0]), wrist_x=wrist_x, wrist_girth=_perimeter(wrist[:, 1:]),

@@ -270,8 +270,13 @@ def sew(body: BodyModel, betas: np.ndarray, mesh: PatternMesh, config: SewConfig
     Raises:
         SimulationError: Newton is missing or the simulation failed.
     """
+    try:
+        import warp
+
+        warp.config.quiet = True  # no banner on a command's stdout (read when newton initialises warp)
+    except ImportError:
+        pass  # _import_engine says what to install
     newton, wp = _import_engine()
-    wp.config.quiet = True  # no banner on a command's stdout
     began = time.perf_counter()
     cfg = config.sim
     device = resolve_device(cfg.device)
