@@ -28,21 +28,23 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--out", type=Path, default=Path("out/garments"))
     parser.add_argument("--vertices", type=int, default=3500)
-    parser.add_argument("--only", nargs="*", help="CATEGORY/PRESET to make (default all)")
+    parser.add_argument("--only", nargs="*", help="CATEGORY/PRESET to make, in this order (default all)")
     args = parser.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    rows = []
-    for category, presets in PRESETS.items():
-        for preset in presets:
-            if args.only and f"{category}/{preset}" not in args.only:
-                continue
-            stem = args.out / f"{category}_{preset}"
-            argv = ["garment", "make", category, "--preset", preset, "--betas", *BODIES[category],
-                    "--vertices", str(args.vertices), "-o", f"{stem}.usda", "--report", f"{stem}.json", "--force"]
-            print("cloth-usd " + shlex.join(argv), flush=True)
-            if cli(argv) != 0:
-                sys.exit(f"failed: {category} {preset}")
-            rows.append(json.loads(Path(f"{stem}.json").read_text()))
+    every = [f"{c}/{p}" for c, presets in PRESETS.items() for p in presets]
+    for item in args.only or every:
+        if item not in every:
+            sys.exit(f"--only {item}: no such preset (valid: {', '.join(every)})")
+        category, preset = item.split("/")
+        stem = args.out / f"{category}_{preset}"
+        argv = ["garment", "make", category, "--preset", preset, "--betas", *BODIES[category],
+                "--vertices", str(args.vertices), "-o", f"{stem}.usda", "--report", f"{stem}.json", "--force"]
+        print("cloth-usd " + shlex.join(argv), flush=True)
+        if cli(argv) != 0:
+            sys.exit(f"failed: {category} {preset}")
+    # The table holds every garment made into OUT so far, in preset order.
+    rows = [json.loads((args.out / f"{e.replace('/', '_')}.json").read_text()) for e in every
+            if (args.out / f"{e.replace('/', '_')}.json").exists()]
     lines = ["| garment | panels | vertices | stretch p50 | stretch p99 | stretch max | time [s] |",
              "|---|---|---|---|---|---|---|"]
     for r in rows:

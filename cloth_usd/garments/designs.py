@@ -26,6 +26,8 @@ __all__ = ["TShirtDesign", "DressDesign", "TrousersDesign", "DESIGNS", "PRESETS"
 _FRONT_AXES = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 #: Gap [m] between the body and a placed panel.
 _CLEARANCE = 0.035
+#: Extra half width [m] of a back trouser panel at the hips and thigh, for the seat.
+_SEAT = 0.02
 #: How far the shoulder line of a front or back panel is raised above the body's shoulder [m].
 _SHOULDER_LIFT = 0.045
 
@@ -85,7 +87,7 @@ class TrousersDesign:
     """Girth ease at the hem (larger: wider, bootcut; smaller: slim)."""
     rise: float = 0.0
     """Waistline above (+) or below (-) the natural waist (the torso's narrowest girth)."""
-    crotch_drop: float = 0.12
+    crotch_drop: float = 0.14
     """How far below the body's crotch the seam is cut."""
     waistband: float = 0.04
     """Waistband height; 0: none."""
@@ -326,16 +328,22 @@ def _trousers(m: BodyMeasurements, d: TrousersDesign) -> Pattern:
     inner_hem = np.array([max(leg_x - hem_half / 2, gap + 0.01), hem_y])
     outer_hem = np.array([inner_hem[0] + hem_half, hem_y])
     crotch_pt = np.array([gap, crotch])
-    outer_thigh = np.array([max(thigh_half + gap, hip_half), crotch])
-    edges = [("hem", line(inner_hem, outer_hem)),
-             ("outseam", bezier(outer_hem, [outer_hem[0], 0.5 * (hem_y + crotch)], outer_thigh,
-                                [hip_half, m.hip_y], [top_half, top_y])),
-             ("top", line([top_half, top_y], [gap, top_y])),
-             ("centre", line([gap, top_y], crotch_pt)),
-             ("inseam", bezier(crotch_pt, [inner_hem[0], crotch - 0.1], inner_hem))]
+
+    def leg(seat: float) -> list:
+        """The leg panel's edges; ``seat``: extra half width [m] at the hips and thigh (a back
+        panel covers the seat, which the front does not)."""
+        outer_thigh = np.array([max(thigh_half + gap, hip_half) + seat, crotch])
+        return [("hem", line(inner_hem, outer_hem)),
+                ("outseam", bezier(outer_hem, [outer_hem[0], 0.5 * (hem_y + crotch)], outer_thigh,
+                                   [hip_half + seat, m.hip_y], [top_half, top_y])),
+                ("top", line([top_half, top_y], [gap, top_y])),
+                ("centre", line([gap, top_y], crotch_pt)),
+                ("inseam", bezier(crotch_pt, [inner_hem[0], crotch - 0.1], inner_hem))]
+
     z_front, z_back = _planes(m)
     panels = []
     for part, z, front in (("front", z_front, True), ("back", z_back, False)):
+        edges = leg(0.0 if front else _SEAT)
         panels.append(_panel(f"{part}_l", edges, z, front, conform=True))
         mirrored = [(n, _mirror(e)) for n, e in reversed(edges)]
         panels.append(_panel(f"{part}_r", mirrored, z, front, conform=True))

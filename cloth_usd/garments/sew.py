@@ -36,16 +36,16 @@ log = logging.getLogger(__name__)
 #: The cloth material and solver for sewing: the data factory's defaults without
 #: self-contact (the stitch pulls panels through each other's margins) and a full-body
 #: collider is not needed at rest.
-_SEW_SIM = SimConfig(self_contact=False, substeps=20, iterations=5)
+_SEW_SIM = SimConfig(self_contact=False, substeps=12, iterations=5)
 
 
 @dataclass(frozen=True)
 class SewConfig:
     """How a pattern is stitched and draped."""
 
-    stitch_frames: int = 40
+    stitch_frames: int = 32
     """Frames (at ``sim.fps``) of seam springs pulling the placed panels together, no gravity."""
-    drape_frames: int = 24
+    drape_frames: int = 16
     """Frames of the merged garment hanging under gravity."""
     seam_stiffness: float = 60.0
     """Seam spring stiffness [N/m] (rest length 0)."""
