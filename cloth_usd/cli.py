@@ -114,11 +114,15 @@ def _parser() -> argparse.ArgumentParser:
                                       "coarse one on the garment's physics")
     tr.add_argument("tier", choices=["coarse", "detail"], help="which generator")
     tr.add_argument("--data", required=True,
-                    help="data set folder (cloth-usd datagen); with --objective physics, a datagen config file "
-                         "whose garments, bodies and motions are trained on without simulating them")
-    tr.add_argument("--objective", choices=["supervised", "physics"],
-                    help="supervised (simulated data) or physics (the garment's energy, no simulation); "
+                    help="data set folder (cloth-usd datagen); with --objective physics or hybrid, a datagen config "
+                         "file whose garments, bodies and motions are trained on without simulating them")
+    tr.add_argument("--objective", choices=["supervised", "physics", "hybrid"],
+                    help="supervised (simulated data), physics (the garment's energy, no simulation) or hybrid "
+                         "(the energy plus the supervised term where --sim-data has simulated frames); "
                          "overrides the config's"),
+    tr.add_argument("--sim-data", metavar="DIR",
+                    help="hybrid: the cloth-usd datagen folder simulated from the --data config (the sequences "
+                         "it holds add the supervised term, weighted by the config's supervised_weight)")
     tr.add_argument("-o", "--out", required=True, help="run folder: checkpoints, history.csv, curve.png")
     tr.add_argument("--config", help="training config (.json or .toml; see cloth_usd.nn.train.TrainConfig)")
     tr.add_argument("--coarse-run", help="detail: the trained coarse run folder (its predictions are M_coarse)")
@@ -389,13 +393,21 @@ def _train(args: argparse.Namespace) -> int:
     if args.objective:
         config = dataclasses.replace(config, objective=args.objective)
 
-    physics = config.objective.value == "physics"
+    hybrid = config.objective.value == "hybrid"
+    physics = config.objective.value == "physics" or hybrid
     if not physics and options != PhysicsOptions():
-        raise ArgumentError(f"--config {config_path}: its \"physics\" table applies to --objective physics only")
+        raise ArgumentError(f"--config {config_path}: its \"physics\" table applies to --objective physics or "
+                            "hybrid only")
     if args.mocap and not physics:
         raise ArgumentError("--mocap: only a physics run reads motions (a supervised run reads simulated data)")
-    # physics: val is the energy [J] above the base garment's (skinned for coarse, M_coarse for detail)
+    if hybrid != (args.sim_data is not None):
+        raise ArgumentError("--sim-data: --objective hybrid needs it (the datagen folder simulated from --data), "
+                            "and only the hybrid objective reads it")
+    # physics: val is the energy [J] above the base garment's (skinned for coarse, M_coarse for detail);
+    # hybrid: plus the supervised term, and the mm are the distance to the simulated target
     mm = ("mm from skinning" if args.tier == "coarse" else "mm from the coarse garment") if physics else "mm"
+    if hybrid:
+        mm = "mm from the simulation" + ("'s coarse target" if args.tier == "coarse" else "")
 
     def show(r) -> None:
         sys.stdout.write(f"epoch {r.epoch + 1}/{config.epochs}: train {r.train_loss:.4g}, val {r.val_loss:.4g} "
@@ -406,10 +418,11 @@ def _train(args: argparse.Namespace) -> int:
         from .nn.physics_train import train_physics
 
         if args.resume:
-            raise ArgumentError("--objective physics: --resume is not supported yet; train into a new --out")
+            raise ArgumentError(f"--objective {config.objective.value}: --resume is not supported yet; train into a "
+                                "new --out")
         result = train_physics(args.data, args.out, config, tier=args.tier, coarse_run=coarse_run,
                                device=args.device, body=_body(args.body_model), progress=show, options=options,
-                               mocap_dir=args.mocap)
+                               mocap_dir=args.mocap, sim_data=args.sim_data)
     else:
         result = train(args.tier, args.data, args.out, config, coarse_run=coarse_run, device=args.device,
                        resume=args.resume, body=_body(args.body_model), progress=show)

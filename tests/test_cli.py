@@ -292,7 +292,7 @@ def test_train_refuses_physics_settings_for_a_supervised_run(tmp_path, capsys):
     config = tmp_path / "c.json"
     config.write_text('{"objective": "supervised", "physics": {"dynamic": true}}')
     assert main(["train", "coarse", "--data", str(tmp_path), "-o", str(tmp_path / "run"), "--config", str(config)]) == 2
-    assert "physics\" table applies to --objective physics only" in capsys.readouterr().err
+    assert "physics\" table applies to --objective physics or hybrid only" in capsys.readouterr().err
     assert main(["train", "coarse", "--data", str(tmp_path), "-o", str(tmp_path / "run"), "--mocap", str(tmp_path)]) == 2
     assert "--mocap: only a physics run" in capsys.readouterr().err
     config.write_text('{"objective": "physics", "physics": {"dynamc": true}}')

@@ -51,6 +51,9 @@ class Objective(str, enum.Enum):
     PHYSICS = "physics"
     """Coarse only: the garment's own energy at the output, no simulation
     (:mod:`cloth_usd.nn.physics_train`)."""
+    HYBRID = "hybrid"
+    """The physics objective plus a supervised term (``supervised_weight``) on the sequences
+    that were simulated (:mod:`cloth_usd.nn.physics_train`)."""
 
 
 class CoarseInput(str, enum.Enum):
@@ -108,6 +111,13 @@ class TrainConfig:
     bending_scale: float = 1.0
     """Physics objective only: multiplies the material's bending stiffness (a stiffer
     bending makes the coarse tier drape without fine folds)."""
+    supervised_weight: float = 1000.0
+    """Hybrid objective only [1/s^2]: the supervised term of a frame is
+    ``supervised_weight / 2 * sum_n m_n |x_n - y_n|^2`` [J] (``m_n`` the vertex masses [kg],
+    ``y`` the simulated frame), a spring that pulls each vertex toward the simulation with an
+    acceleration ``supervised_weight x distance``: as strong as gravity at ``9.81 /
+    supervised_weight`` [m] (1 cm at the default; a starting point, not tuned). 0: the physics
+    objective's loss."""
     heading: Heading = Heading.CANONICAL
     """Coarse only: the frame the models see the body in (a detail run takes its coarse
     run's): ``canonical`` turns every frame's body to face +Z (the garment turned with it), so
@@ -125,7 +135,8 @@ class TrainConfig:
                   "batch": self.batch >= 1, "width": self.width > 0, "grad_clip": self.grad_clip >= 0,
                   "stat_frames": self.stat_frames >= 1, "val_frames": self.val_frames >= 0,
                   "max_batches": self.max_batches >= 0, "max_frames": self.max_frames >= 0,
-                  "prefetch": self.prefetch >= 0, "bending_scale": self.bending_scale > 0}
+                  "prefetch": self.prefetch >= 0, "bending_scale": self.bending_scale > 0,
+                  "supervised_weight": self.supervised_weight >= 0}
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
             raise ArgumentError(f"TrainConfig: out of range: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")

@@ -140,9 +140,9 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
     Args:
         coarse_run, detail_run: training run folders (detail optional).
         data_dir: the data set both were trained on (its ``fit.npz`` ships in the bundle,
-            the sha256 of its ``manifest.json`` is recorded); for a physics-trained coarse run,
-            the data set config it was trained on (the run's own ``fit.npz`` ships, the
-            config's sha256 is recorded).
+            the sha256 of its ``manifest.json`` is recorded); for a coarse run trained on the
+            physics or hybrid objective, the data set config it was trained on (the run's own
+            ``fit.npz`` ships, the config's sha256 is recorded).
         out_dir: the bundle folder (see :func:`cloth_usd.runtime.bundle.write_bundle`).
         name, category: the bundle's name and garment category.
         metrics: evaluation metrics (``cloth-usd evaluate``'s ``metrics.json``) to record.
@@ -176,13 +176,14 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run")
     if detail is not None and detail.tier is not Tier.DETAIL:
         raise ArgumentError(f"--detail-run {detail_run}: is a {detail.tier.value} run")
-    if coarse.info["data"].get("kind") == "physics":  # trained on a data set config's planned sequences
+    planned = ("physics", "hybrid")  # the data kinds of runs trained on a data set config's planned sequences
+    if coarse.info["data"].get("kind") in planned:
         from ..core.body import load_body_model
         from .physics_train import PHYSICS_FIT, physics_set
 
-        if detail is not None and detail.info["data"].get("kind") != "physics":
-            raise ArgumentError(f"--detail-run {detail_run}: trained on simulated data, the coarse run on physics; "
-                                "a bundle's two runs share their data")
+        if detail is not None and detail.info["data"].get("kind") not in planned:
+            raise ArgumentError(f"--detail-run {detail_run}: trained on simulated data, the coarse run on a data set "
+                                "config (physics or hybrid); a bundle's two runs share their data")
         body = body if body is not None else load_body_model()
         data = physics_set(data_dir, body, heading=coarse.config.heading, splits=(Split.VAL,),
                            max_frames=parity_frames, mocap_dir=mocap_dir)
@@ -237,6 +238,10 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         n_train = coarse.info["data"].get("train_sequences")
         training = {"manifest_sha256": data_sha256,
                     "description": description or f"{n_train} training sequences of {data_dir.name}"}
+        simulated = {run.tier.value: run.info["hybrid"]["sim_manifest_sha256"] for run in (coarse, detail)
+                     if run is not None and run.info.get("hybrid")}
+        if simulated:  # hybrid runs: the simulated data of their supervised term, per tier
+            training["sim_manifest_sha256"] = simulated
         out = write_bundle(out_dir, name=name, category=category, coarse_onnx=coarse_path,
                            detail_onnx=detail_path, fit_npz=fit_npz, configs=configs,
                            training_data=training, metrics=summary, opset=OPSET, force=force,

@@ -34,6 +34,20 @@ clip are smoothed, which is not the equation of motion. (Measured on the README'
 the inertia there is 1e-5 of the energy and the two gradients differ by 2e-5 of their norm.)
 The clip's frame rate is its motion's (``MotionSpec.fps``); frames before ``t = 2`` and a
 clip's warm-up are never ``t``.
+
+The hybrid objective (``TrainConfig.objective`` ``hybrid``, ``sim_data`` a ``cloth-usd
+datagen`` folder of the same config) adds, on every clip whose sequence was simulated there,
+a supervised term at each frame ``t``: ``supervised_weight / 2 * sum_n m_n |x_n - y_n|^2``
+[J], ``m_n`` the vertex masses and ``y`` the tier's supervised target (the coarse tier: the
+simulation smoothed as ``TrainConfig.coarse_target`` says, as supervised training; the detail
+tier: the simulation), turned into the frame the models see like the poses. Weighted by mass,
+the term is a spring pulling every vertex with the acceleration ``supervised_weight x
+distance`` whatever the garment's size or resolution, so the weight [1/s^2] compares with
+gravity (equal at ``9.81 / supervised_weight`` m). Other clips train on the energy alone. A
+shard is used only when its manifest status is ``ok`` and its poses, translation, body and
+garment topology are the clip's (the shard's frames are the clip's one to one, warm-up
+included; the warm-up is never ``t``). Validation reports the energy as for physics and, as
+``val_mm``, the mean distance [mm] to the target on the validation clips that were simulated.
 """
 
 from __future__ import annotations
@@ -57,7 +71,7 @@ from ..core.pipeline import (CoarseBase, GarmentPair, coarse_base_points, coarse
                              pose_body, prepare_pair)
 from ..core.scene import Tier
 from ..errors import ArgumentError, ClothUsdError
-from .data import Moments, Split, even_frames, plan_batches
+from .data import CoarseTarget, Moments, Split, even_frames, plan_batches
 from .physics import GarmentRest, Material, contact_normal_force, friction_energy, garment_energy, garment_rest
 from .train import (CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, TrainConfig, TrainResult, _atomic_text,
                     _coarse_forward, _detail_forward, _record_epoch, _start_epoch, _step, _Tensors, build_model,
@@ -173,6 +187,9 @@ class PhysicsClip:
     fps: float = 24.0
     """Frame rate of the motion [1/s] (its ``MotionSpec.fps``); the dynamic objective's
     time step is ``1 / fps``."""
+    target: np.ndarray | None = None
+    """(T, N, 3) float32 the hybrid objective's simulated target [m] (the simulation, or its
+    coarse target), in the frame of ``poses``; None: the sequence was not simulated."""
 
     @property
     def num_frames(self) -> int:
@@ -202,7 +219,8 @@ class PhysicsSet:
 
 def physics_set(config_path: str | Path, body: BodyModel | None = None, *, heading: Heading | str = Heading.CANONICAL,
                 splits: Sequence[Split | str] | None = None, max_frames: int | None = None,
-                bending_scale: float = 1.0, mocap_dir: str | Path | None = None) -> PhysicsSet:
+                bending_scale: float = 1.0, mocap_dir: str | Path | None = None,
+                sim_data: str | Path | None = None, sim_target: CoarseTarget | str | None = None) -> PhysicsSet:
     """Plan a data set config's sequences (no simulation) for the physics objective.
 
     Args:
@@ -214,6 +232,12 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
         bending_scale: multiplies the material's bending stiffness.
         mocap_dir: the folder the config's BVH motions are relative to (see
             :func:`~cloth_usd.datagen.factory.load_config`).
+        sim_data: a ``cloth-usd datagen`` folder of this config: every clip whose sequence it
+            holds (status ``ok``) gets its :attr:`PhysicsClip.target` (the hybrid objective).
+        sim_target: the target made from the simulation: a coarse target
+            (:class:`~cloth_usd.nn.data.CoarseTarget`), or the simulation itself when None.
+    Raises:
+        ArgumentError: ``sim_data`` is not a data set of this config (one line naming it).
     """
     from ..core.files import file_sha256
     from ..datagen.factory import fit_training_pairs, load_config, plan_jobs
@@ -229,6 +253,7 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
     rates = _motion_rates(factory, config_path)
     sim_fps = float(SimConfig(**factory.sim).fps)
     keep = None if splits is None else {Split(s) for s in splits}
+    simulated = _sim_entries(Path(sim_data), config_path, jobs, base) if sim_data is not None else {}
     pairs: dict[str, tuple[GarmentPair, GarmentRest]] = {}
     clips = []
     for job in jobs:
@@ -241,14 +266,85 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
             pairs[key] = pair, garment_rest(job.garment_vertices, job.garment_faces, material)
         pair, rest = pairs[key]
         poses, transl = job.poses[:max_frames], job.transl[:max_frames]
+        target = None
+        if job.name in simulated:  # the shard's frames are the job's, one to one
+            target = _sim_frames(Path(sim_data), simulated[job.name], job, config_path, sim_target)[:max_frames]
         if Heading(heading) is Heading.CANONICAL:
-            poses = heading_frame(poses, transl, pair.joints[0]).canonical_poses(poses)
+            frame = heading_frame(poses, transl, pair.joints[0])
+            poses = frame.canonical_poses(poses)
+            target = frame.to_canonical(target).astype(np.float32) if target is not None else None
         clips.append(PhysicsClip(name=job.name, split=split, pair=pair, rest=rest,
                                  rest_points=np.asarray(job.garment_vertices, dtype=np.float64),
                                  poses=np.asarray(poses, dtype=np.float64),
                                  transl=np.asarray(transl, dtype=np.float64), meta=dict(job.meta),
-                                 fps=float(job.meta.get("fps") or rates.get(job.meta["motion"], sim_fps))))
+                                 fps=float(job.meta.get("fps") or rates.get(job.meta["motion"], sim_fps)),
+                                 target=target))
     return PhysicsSet(config_sha256=file_sha256(config_path), fit=fit, material=material, clips=tuple(clips))
+
+
+def _sim_entries(sim_data: Path, config_path: Path, jobs, material: Material) -> dict[str, dict]:
+    """The manifest entries of ``sim_data`` (status ``ok``) by job name, once the folder is
+    known to be simulated from ``config_path``: it shares sequences with it and its solver
+    settings give the same ``material``.
+
+    Raises:
+        ArgumentError: naming ``sim_data``, when it is not a data set of this config.
+    """
+    from ..core.shards import DatasetError, Manifest
+    from ..datagen.simulate import SimConfig
+
+    try:
+        manifest = Manifest.read(sim_data)
+    except DatasetError:
+        raise ArgumentError(f"--sim-data {sim_data}: not a data set folder (no readable manifest.json; make one "
+                            f"with cloth-usd datagen {config_path})") from None
+    names = {job.name for job in jobs}
+    if not names & set(manifest.sequences):
+        raise ArgumentError(f"--sim-data {sim_data}: none of its sequences is one {config_path} plans "
+                            "(a data set of another config?)")
+    try:
+        same = Material.from_sim_config(SimConfig(**manifest.config)) == material
+    except (TypeError, ValueError, ClothUsdError) as exc:
+        raise ArgumentError(f"--sim-data {sim_data}: its manifest's solver settings are unreadable ({exc})") from None
+    if not same:
+        raise ArgumentError(f"--sim-data {sim_data}: simulated with another material than {config_path}'s sim "
+                            "settings (a data set of another config?)")
+    return {name: entry for name, entry in manifest.sequences.items()
+            if name in names and entry.get("status") == "ok" and entry.get("shard")}
+
+
+def _sim_frames(sim_data: Path, entry: dict, job, config_path: Path,
+                sim_target: CoarseTarget | str | None) -> np.ndarray:
+    """(T, N, 3) float32 a job's simulated target [m], world frame, every frame of the job.
+
+    Raises:
+        ArgumentError: the shard is unreadable, or holds another sequence than ``job``.
+    """
+    from ..core.shards import DatasetError, read_shard
+
+    path = sim_data / entry["shard"]
+    try:
+        shard = read_shard(path)
+    except DatasetError as exc:
+        raise ArgumentError(f"--sim-data: {exc}") from None
+
+    def same(a, b) -> bool:
+        a, b = np.asarray(a), np.asarray(b)
+        return a.shape == b.shape and np.allclose(a, b, rtol=0.0, atol=1e-9)
+
+    if not (same(shard.poses, job.poses) and same(shard.transl, job.transl) and same(shard.betas, job.betas)
+            and same(shard.garment_faces, job.garment_faces)):
+        raise ArgumentError(f"--sim-data {sim_data}: {path.name} holds another sequence than the one {config_path} "
+                            f"plans as {job.name} (poses, body or garment differ: a data set of another config?)")
+    if sim_target is None:
+        return shard.positions.astype(np.float32)
+    if CoarseTarget(sim_target) is CoarseTarget.STORED:
+        return shard.coarse.astype(np.float32)
+    from ..core.mesh import laplacian_smooth
+    from .data import TAUBIN_LAMBDA, TAUBIN_MU, TAUBIN_PASSES
+
+    return laplacian_smooth(shard.positions.astype(np.float64), shard.garment_faces, iterations=TAUBIN_PASSES,
+                            lam=TAUBIN_LAMBDA, mu=TAUBIN_MU).astype(np.float32)
 
 
 def _motion_rates(factory, config_path: Path) -> dict[str, float]:
@@ -419,6 +515,17 @@ def _terms(clip: PhysicsClip, x: torch.Tensor, win: _Window, material: Material,
     return terms
 
 
+def _supervised(clip: PhysicsClip, x_t: torch.Tensor, t: np.ndarray, weight: float) -> torch.Tensor | None:
+    """(B,) the hybrid objective's supervised term [J] at frames ``t`` (B,) of garments
+    ``x_t`` (B, N, 3) [m]: ``weight / 2 * sum_n m_n |x_n - y_n|^2``, ``y`` the clip's
+    :attr:`~PhysicsClip.target`, ``weight`` [1/s^2]; None for a clip without one."""
+    if clip.target is None:
+        return None
+    y = torch.from_numpy(clip.target[np.asarray(t, dtype=np.int64)]).to(x_t)
+    masses = clip.rest.masses.to(x_t)
+    return 0.5 * weight * (masses * ((x_t - y) ** 2).sum(-1)).sum(-1)
+
+
 @dataclass(frozen=True)
 class _Validation:
     """Validation means per window (frame t) [J], and the distance from the base [mm]."""
@@ -426,6 +533,10 @@ class _Validation:
     model: dict[str, float]
     base: dict[str, float]
     mm: float
+    supervised: float = 0.0
+    """Hybrid: the supervised term's mean per window [J] (0 on windows without a target)."""
+    sim_mm: float = math.nan
+    """Hybrid: the mean distance [mm] to the target over the windows that have one (NaN: none)."""
 
     @property
     def relative(self) -> float:
@@ -434,18 +545,19 @@ class _Validation:
 
 
 def _validate(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainConfig, material: Material,
-              options: PhysicsOptions = PhysicsOptions()) -> _Validation:
+              options: PhysicsOptions = PhysicsOptions(), weight: float | None = None) -> _Validation:
     """The objective on the validation windows, for the model's garment and its base (the
     skinned garment for the coarse tier, the coarse model's for the detail tier; dynamic: each
-    with its own history), and the mean distance between them at frame t."""
+    with its own history), and the mean distance between them at frame t. ``weight`` (the
+    hybrid objective's, None: physics) adds the supervised term and the distance to the target."""
     names = (*TERMS, "total")
     if not clips:
         nan = {name: math.nan for name in names}
-        return _Validation(nan, dict(nan), math.nan)
+        return _Validation(nan, dict(nan), math.nan, math.nan if weight is not None else 0.0)
     model.eval()
     sums = {"model": dict.fromkeys(names, 0.0), "base": dict.fromkeys(names, 0.0)}
-    dist = 0.0
-    count = vertices = 0
+    dist = supervised = sim_dist = 0.0
+    count = vertices = sim_vertices = 0
     with torch.no_grad():
         for k, t in window_batches(clips, config.batch, frames=config.val_frames or None, window=options.window):
             clip = clips[k]
@@ -459,33 +571,64 @@ def _validate(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainCon
             dist += float(torch.linalg.vector_norm(x[now] - base[now], dim=-1).sum())
             count += len(t)
             vertices += len(t) * x.shape[1]
+            term = _supervised(clip, x[now], t, weight) if weight is not None else None
+            if term is not None:
+                supervised += float(term.sum())
+                y = torch.from_numpy(clip.target[np.asarray(t, dtype=np.int64)]).to(x)
+                sim_dist += float(torch.linalg.vector_norm(x[now] - y, dim=-1).sum())
+                sim_vertices += len(t) * x.shape[1]
     if not count:
         raise ArgumentError(f"no validation window: every validation clip is shorter than {len(options.window)} "
                             "frames (after its warm-up)")
     mean = {who: {name: v / count for name, v in terms.items()} for who, terms in sums.items()}
-    return _Validation(mean["model"], mean["base"], dist / vertices * 1000.0)
+    return _Validation(mean["model"], mean["base"], dist / vertices * 1000.0, supervised / count,
+                       sim_dist / sim_vertices * 1000.0 if sim_vertices else math.nan)
 
 
-def _write_val_terms(path: Path, rows: list[tuple[int, _Validation]]) -> None:
+def _write_val_terms(path: Path, rows: list[tuple[int, _Validation]], hybrid: bool = False) -> None:
+    """``val_terms.csv``; ``hybrid`` adds the supervised term [J] and the distance to the target [mm]."""
     names = (*TERMS, "total")
-    lines = [",".join(["epoch", *(f"{who}_{n}" for who in ("model", "base") for n in names), "mm"])]
+    extra = ["supervised", "sim_mm"] if hybrid else []
+    lines = [",".join(["epoch", *(f"{who}_{n}" for who in ("model", "base") for n in names), "mm", *extra])]
     for epoch, v in rows:
+        more = [f"{v.supervised:.9g}", f"{v.sim_mm:.6g}"] if hybrid else []
         lines.append(",".join([str(epoch), *(f"{getattr(v, who)[n]:.9g}" for who in ("model", "base") for n in names),
-                               f"{v.mm:.6g}"]))
+                               f"{v.mm:.6g}", *more]))
     _atomic_text("\n".join(lines) + "\n", path)
+
+
+def _hybrid_record(sim_data: Path, config: TrainConfig, tier: Tier, train_clips: Sequence[PhysicsClip],
+                   val_clips: Sequence[PhysicsClip]) -> dict:
+    """run.json's ``hybrid``: the simulated data, the weight and target, the clips with frames."""
+    from ..core.files import file_sha256
+
+    with_target = {name: sum(c.target is not None for c in clips)
+                   for name, clips in (("train", train_clips), ("val", val_clips))}
+    if not with_target["train"]:
+        log.warning("--sim-data %s: no training sequence was simulated there; the hybrid run trains on the energy "
+                    "alone", sim_data)
+    if val_clips and not with_target["val"]:
+        log.warning("--sim-data %s: no validation sequence was simulated there; val_mm is NaN", sim_data)
+    return {"sim_data": str(sim_data.resolve()), "sim_manifest_sha256": file_sha256(sim_data / "manifest.json"),
+            "supervised_weight": config.supervised_weight, "supervised_weight_unit": "1/s^2",
+            "target": "simulation" if tier is Tier.DETAIL else f"coarse target ({config.coarse_target.value})",
+            "train_sequences_simulated": with_target["train"], "val_sequences_simulated": with_target["val"],
+            "val_mm": "mean distance to the target [mm] on the simulated validation sequences"}
 
 
 def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainConfig = TrainConfig(
         objective=Objective.PHYSICS, coarse_base=CoarseBase.SKINNED), *, tier: Tier | str = Tier.COARSE,
         coarse_run: str | Path | None = None, device: str | None = "auto", body: BodyModel | None = None,
         progress: Callable[[EpochRecord], None] | None = None,
-        options: PhysicsOptions = PhysicsOptions(), mocap_dir: str | Path | None = None) -> TrainResult:
-    """Train a generator on the physics objective (see the module docstring).
+        options: PhysicsOptions = PhysicsOptions(), mocap_dir: str | Path | None = None,
+        sim_data: str | Path | None = None) -> TrainResult:
+    """Train a generator on the physics (or hybrid) objective (see the module docstring).
 
     Args:
         config_path: the data set config whose pairs and motions it trains on.
         run_dir: the run folder to create.
-        config: ``objective`` must be ``physics``; ``bending_scale`` scales the bending
+        config: ``objective`` must be ``physics`` or ``hybrid`` (its ``supervised_weight``
+            weighs the supervised term); ``bending_scale`` scales the bending
             (10 for the coarse tier's drape; 1, the material's, for the detail tier).
         tier: coarse, or detail on top of ``coarse_run`` (its predictions are ``M_coarse``;
             the detail run takes its heading and coarse base).
@@ -497,15 +640,24 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
             windows of three frames, and the validation energy (and ``val_terms.csv``)
             includes each garment's inertia over its own history.
         mocap_dir: the folder the config's BVH motions are relative to.
+        sim_data: hybrid only (and needed there): the ``cloth-usd datagen`` folder simulated
+            from ``config_path``; its training and validation sequences are the targets.
+            run.json records it under ``hybrid`` (how many clips had simulated frames), and
+            ``val_mm`` is the validation distance to the target [mm].
     Raises:
-        ArgumentError: a run exists in ``run_dir``, the config has no training pairs, or
-            the tier and ``coarse_run`` do not go together.
+        ArgumentError: a run exists in ``run_dir``, the config has no training pairs, the
+            tier and ``coarse_run`` do not go together, or ``sim_data`` is missing, not
+            wanted or not a data set of ``config_path``.
     """
     from .train import _coarse_run_record, _trainable, load_run, pick_device
 
     tier = _trainable(tier, "train_physics: tier")
-    if config.objective is not Objective.PHYSICS:
-        raise ArgumentError(f"train_physics: config.objective is {config.objective.value!r}, not 'physics'")
+    if config.objective not in (Objective.PHYSICS, Objective.HYBRID):
+        raise ArgumentError(f"train_physics: config.objective is {config.objective.value!r}, not 'physics' or 'hybrid'")
+    hybrid = config.objective is Objective.HYBRID
+    if hybrid != (sim_data is not None):
+        raise ArgumentError("--sim-data: the hybrid objective needs the datagen folder simulated from --data, "
+                            "and only the hybrid objective reads one")
     if (tier is Tier.DETAIL) != (coarse_run is not None):
         raise ArgumentError("train_physics: the detail tier needs --coarse-run (the trained coarse run), "
                             "the coarse tier takes none")
@@ -521,7 +673,8 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
     base = coarse.config.coarse_base if coarse is not None else config.coarse_base
     data = physics_set(config_path, body, heading=heading, splits=(Split.TRAIN, Split.VAL),
                        max_frames=config.max_frames or None, bending_scale=config.bending_scale,
-                       mocap_dir=mocap_dir)
+                       mocap_dir=mocap_dir, sim_data=sim_data,
+                       sim_target=config.coarse_target if tier is Tier.COARSE else None)
     train_clips, val_clips = data.split(Split.TRAIN), data.split(Split.VAL)
     if not train_clips:
         raise ArgumentError(f"{config_path}: no training sequences")
@@ -539,13 +692,18 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
     info = {"format": RUN_FORMAT, "tier": tier.value, "config": config.to_json(),
             "model_config": dataclasses.asdict(model.config),
             "data": {"path": str(Path(config_path).resolve()), "manifest_sha256": data.config_sha256,
-                     "train_sequences": len(train_clips), "val_sequences": len(val_clips), "kind": "physics"},
+                     "train_sequences": len(train_clips), "val_sequences": len(val_clips),
+                     "kind": config.objective.value},
             "physics": {"material": dataclasses.asdict(data.material), "fit": PHYSICS_FIT,
                         "options": options.to_json(), "fps": sorted({c.fps for c in data.clips})},
             "coarse_run": _coarse_run_record(coarse) if coarse is not None else None,
             "body_model_sha256": body.sha256, "torch": torch.__version__}
+    weight = config.supervised_weight if hybrid else None
+    if hybrid:
+        info["hybrid"] = _hybrid_record(Path(sim_data), config, tier, train_clips, val_clips)
     _atomic_text(json.dumps(info, indent=2, sort_keys=True) + "\n", run_dir / RUN)
     against = "skinning" if tier is Tier.COARSE else "the coarse garment"
+    target = "the simulation" if tier is Tier.DETAIL else "the simulation's coarse target"
     history: list[EpochRecord] = []
     best_loss, best_epoch = math.inf, -1
     terms_rows: list[tuple[int, _Validation]] = []
@@ -560,19 +718,29 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
         for k, t in batches:
             clip = train_clips[k]
             win = _window(step, clip, t, options)
-            loss = _terms(clip, step.forward(model, clip, win.inputs), win, data.material, options)["total"].mean()
-            total += _step(model, optimizer, loss, config.grad_clip)
-        val = _validate(model, step, val_clips, config, data.material, options)
-        record = EpochRecord(epoch=epoch, train_loss=total / max(len(batches), 1), val_loss=val.relative,
-                             val_mm=val.mm, lr=lr, seconds=time.perf_counter() - began)
+            x = step.forward(model, clip, win.inputs)
+            loss = _terms(clip, x, win, data.material, options)["total"]
+            term = _supervised(clip, x[torch.from_numpy(win.index[-1]).to(x.device)], t, weight) if hybrid else None
+            if term is not None:
+                loss = loss + term
+            total += _step(model, optimizer, loss.mean(), config.grad_clip)
+        val = _validate(model, step, val_clips, config, data.material, options, weight)
+        record = EpochRecord(epoch=epoch, train_loss=total / max(len(batches), 1),
+                             val_loss=val.relative + val.supervised if hybrid else val.relative,
+                             val_mm=val.sim_mm if hybrid else val.mm, lr=lr, seconds=time.perf_counter() - began)
         best_loss, best_epoch = _record_epoch(run_dir, model, optimizer, history, record, best_loss, best_epoch)
         terms_rows.append((epoch, val))
-        _write_val_terms(run_dir / VAL_TERMS, terms_rows)
-        plot_history(history, run_dir / CURVE, title=f"{tier.value} (physics{', dynamic' if options.dynamic else ''}): "
-                     f"{run_dir.name}", loss_label=f"energy [J] (validation: relative to {against})",
-                     mm_label=f"validation: distance from {against} [mm]", log_loss=False)
-        log.info("physics %s epoch %d: train %.4g J, val %+.4g J vs %s (%.1f mm from it), %.1f s", tier.value,
-                 epoch, record.train_loss, record.val_loss, against, val.mm, record.seconds)
+        _write_val_terms(run_dir / VAL_TERMS, terms_rows, hybrid)
+        kind = config.objective.value + (", dynamic" if options.dynamic else "")
+        plot_history(history, run_dir / CURVE, title=f"{tier.value} ({kind}): {run_dir.name}",
+                     loss_label=f"energy + supervised [J] (validation: energy relative to {against} + supervised)"
+                     if hybrid else f"energy [J] (validation: relative to {against})",
+                     mm_label=f"validation: distance from {target if hybrid else against} [mm]", log_loss=False)
+        log.info("%s %s epoch %d: train %.4g J, val %+.4g J vs %s (%.1f mm from it), %.1f s", kind, tier.value,
+                 epoch, record.train_loss, val.relative, against, val.mm, record.seconds)
+        if hybrid:
+            log.info("hybrid %s epoch %d: val supervised %.4g J, %.2f mm from %s", tier.value, epoch, val.supervised,
+                     val.sim_mm, target)
         if progress is not None:
             progress(record)
     if not history:

@@ -208,7 +208,7 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
     if config.objective is not Objective.SUPERVISED:
         raise ArgumentError(f"train: objective {config.objective.value!r} trains on a data set config, not on "
                             "simulated data (cloth_usd.nn.physics_train.train_physics; cloth-usd train coarse "
-                            "--objective physics --data CONFIG)")
+                            "--objective physics|hybrid --data CONFIG)")
     dev = pick_device(device)
     run_dir = Path(run_dir)
     if not resume and (run_dir / CHECKPOINT).exists():
