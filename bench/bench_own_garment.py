@@ -47,6 +47,7 @@ def garment_stage(path: Path, config_path: Path, body_name: str = "slim") -> tup
     _, joints = shape_body(body, betas)
     verts, faces = make_tshirt(body, betas, variant)
     path.parent.mkdir(parents=True, exist_ok=True)
+    path.unlink(missing_ok=True)
     stage = Usd.Stage.CreateNew(str(path))
     times = np.array([1.0, 2.0])
     set_stage_metadata(stage, up_axis="Y", meters_per_unit=1.0, fps=30.0, start=times[0], end=times[-1])
@@ -65,6 +66,8 @@ def main(argv=None) -> int:
     ap.add_argument("--mocap", help="the folder of the --motions clips")
     ap.add_argument("--motions", help="extra training motions for train-garment (JSON list)")
     ap.add_argument("--out", default="out/own_garment")
+    ap.add_argument("--no-train", action="store_true",
+                    help="evaluate the bundle an earlier run left in OUT/bundle (its time from timing.json)")
     ap.add_argument("extra", nargs="*", help="more train-garment flags, after --")
     args = ap.parse_args(argv)
     out = Path(args.out)
@@ -75,10 +78,13 @@ def main(argv=None) -> int:
     if args.motions:
         cmd += ["--motions", args.motions, "--mocap", args.mocap]
     cmd += args.extra
-    print(" ".join(cmd), flush=True)
-    t0 = time.perf_counter()
-    subprocess.run(cmd, check=True)
-    minutes = (time.perf_counter() - t0) / 60
+    if args.no_train:
+        minutes = json.loads((out / "bundle.work" / "timing.json").read_text())["total"] / 60
+    else:
+        print(" ".join(cmd), flush=True)
+        t0 = time.perf_counter()
+        subprocess.run(cmd, check=True)
+        minutes = (time.perf_counter() - t0) / 60
     rows = {}
     for name, b in (("own", bundle), ("reference", Path(args.reference))):
         report = evaluate_bundle(args.testset, b, out / f"eval_{name}", splits=("test_garment",))

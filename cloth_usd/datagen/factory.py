@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 
 from ..core.association import associate
-from ..core.body import load_body_model, shape_body
+from ..core.body import load_body_model, posed_vertices, shape_body
 from ..core.files import check_keys, read_config
 from ..core.fit import FitModel, common_anchors, fit_factor_analysis, pair_distances
 from ..errors import ArgumentError
@@ -130,7 +130,18 @@ class _Motion:
     source: dict | None = None
 
 
-def _motion(fields: dict, config: FactoryConfig, where: str, smpl_joints: np.ndarray) -> _Motion:
+def _check_speed(body, poses: np.ndarray, transl: np.ndarray, spec: MocapSpec, where: str) -> None:
+    """Refuse a clip stretch whose body jumps (see :attr:`MocapSpec.max_body_speed`)."""
+    v = posed_vertices(body, np.zeros(1), poses, transl)  # (T, V, 3), the mean body
+    speed = np.linalg.norm(np.diff(v, axis=0), axis=2).max(axis=1) * spec.fps
+    t = int(np.argmax(speed))
+    if speed[t] > spec.max_body_speed:
+        raise ArgumentError(f"{where} ({spec.bvh} from {spec.start_seconds:g} s): the body moves {speed[t]:.1f} m/s "
+                            f"between frames {t} and {t + 1}, past max_body_speed {spec.max_body_speed:g} (a capture "
+                            "glitch?); pick another start_seconds, or raise max_body_speed for this entry")
+
+
+def _motion(fields: dict, config: FactoryConfig, where: str, smpl_joints: np.ndarray, body=None) -> _Motion:
     if not isinstance(fields, dict):
         raise ArgumentError(f"{where}: expected a table of motion fields, got {fields!r}")
     if "bvh" in fields:
@@ -138,12 +149,14 @@ def _motion(fields: dict, config: FactoryConfig, where: str, smpl_joints: np.nda
             spec = MocapSpec(**fields)
         except TypeError as exc:
             raise ArgumentError(f"{where}: {exc} (MocapSpec fields: bvh, start_seconds, seconds, fps, "
-                                "ease_seconds, ramp_seconds, name)") from None
+                                "ease_seconds, ramp_seconds, name, max_body_speed)") from None
         if not config.mocap_dir:
             raise ArgumentError(f"{where} names the clip {spec.bvh!r} but no mocap folder is given: pass --mocap DIR "
                                 f"(or set ${MOCAP_ENV})")
         m = mocap_motion(spec, config.mocap_dir, smpl_joints=smpl_joints)
         poses, transl, warmup = m.poses, m.transl, m.warmup_frames
+        if body is not None:
+            _check_speed(body, poses, transl, spec, where)
         name, source, fps = spec.label, m.source, spec.fps
     else:
         try:
@@ -195,8 +208,8 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     train_shirts = [i for i in range(len(variants)) if i not in config.test_shirts]
     train_bodies = [n for n in config.bodies if n not in config.test_bodies]
     mean_joints = shape_body(body, np.zeros(1))[1]
-    train_m = [_motion(m, config, f"train_motions[{i}]", mean_joints) for i, m in enumerate(config.train_motions)]
-    test_m = [_motion(m, config, f"test_motions[{i}]", mean_joints) for i, m in enumerate(config.test_motions)]
+    train_m = [_motion(m, config, f"train_motions[{i}]", mean_joints, body) for i, m in enumerate(config.train_motions)]
+    test_m = [_motion(m, config, f"test_motions[{i}]", mean_joints, body) for i, m in enumerate(config.test_motions)]
     sim_fps = float(config.sim.get("fps", SimConfig.fps))
     for kind, motions in (("train_motions", train_m), ("test_motions", test_m)):
         for i, m in enumerate(motions):

@@ -101,6 +101,16 @@ def test_factory_refuses_a_motion_at_another_rate_than_the_simulation(tmp_path):
         plan_jobs(load_config(path, mocap_dir=MOCAP))
 
 
+def test_a_stretch_whose_body_jumps_is_refused_when_planned(tmp_path):
+    """A capture glitch (a limb moving farther in a frame than a body can) is named, not simulated."""
+    walk = {"bvh": WALK, "seconds": 0.6, "ease_seconds": 0.3, "ramp_seconds": 0.1}
+    plan_jobs(load_config(_config(tmp_path), mocap_dir=MOCAP))  # a walk moves about 3 m/s at most
+    path = _config(tmp_path, test_motions=[{**walk, "max_body_speed": 0.5}])
+    with pytest.raises(ArgumentError, match=rf"test_motions\[0\] \({WALK} from 0 s\): the body moves [0-9.]+ m/s "
+                                            r"between frames \d+ and \d+, past max_body_speed 0.5"):
+        plan_jobs(load_config(path, mocap_dir=MOCAP))
+
+
 def test_simulate_splits_are_checked(tmp_path):
     with pytest.raises(ArgumentError, match="simulate_splits.*test_motions"):
         plan_jobs(load_config(_config(tmp_path, simulate_splits=["test_motions"]), mocap_dir=MOCAP))

@@ -1,0 +1,92 @@
+"""Report (not a test): the quality figures of a simulated data set, per split, from its shards.
+
+For each split: sequences kept and rejected, evaluated frames (after each clip's warm-up),
+the fraction of garment vertices inside the body (mean over frames, and the worst frame),
+edge stretch against the rest garment (the median frame's 99th percentile, and the
+largest edge of any frame), the simulation's seconds per frame; then the per-frame error
+floor of the held poses (:func:`cloth_usd.datagen.floor.floor_report`). Writes
+``OUT/quality.md`` and ``OUT/quality.json`` (also printed).
+
+Run: python bench/testset_quality.py DATA [--out DATA/report]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+from cloth_usd.core.shards import Manifest, read_shard
+from cloth_usd.datagen.floor import FLOOR_SPLIT, floor_report
+from cloth_usd.datagen.simulate import unique_edges
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("data", help="a cloth-usd datagen folder")
+    ap.add_argument("--out", help="report folder (default: DATA/report)")
+    args = ap.parse_args(argv)
+    root = Path(args.data)
+    out = Path(args.out) if args.out else root / "report"
+    out.mkdir(parents=True, exist_ok=True)
+    manifest = Manifest.read(root)
+    acc: dict[str, dict] = defaultdict(lambda: defaultdict(list))
+    for name, entry in sorted(manifest.sequences.items()):
+        meta = entry.get("meta", {})
+        split = meta.get("split", "?")
+        if split == FLOOR_SPLIT:
+            continue
+        a = acc[split]
+        if entry.get("status") != "ok":
+            a["rejected"].append(name)
+            continue
+        shard = read_shard(root / entry["shard"])
+        warm = int(meta.get("warmup_frames", 0))
+        x = shard.positions[warm:].astype(np.float64)
+        rest = shard.garment_vertices.astype(np.float64)
+        edges = unique_edges(shard.garment_faces)
+        rest_len = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1)
+        ratio = np.linalg.norm(x[:, edges[:, 1]] - x[:, edges[:, 0]], axis=2) / np.maximum(rest_len, 1e-12)
+        a["kept"].append(name)
+        a["frames"].append(x.shape[0])
+        a["vertices"].append(rest.shape[0])
+        a["penetration"].extend(shard.penetration[warm:].tolist())
+        a["stretch_p99"].extend(np.percentile(ratio, 99, axis=1).tolist())
+        a["stretch_max"].append(float(ratio.max()))
+        a["s_per_frame"].append(float(entry.get("quality", {}).get("seconds_per_frame", np.nan)))
+    rows = []
+    for split, a in sorted(acc.items()):
+        pen = np.asarray(a["penetration"]) if a["penetration"] else np.zeros(1)
+        rows.append({"split": split, "kept": len(a["kept"]), "rejected": len(a["rejected"]),
+                     "rejected_names": a["rejected"], "frames": int(sum(a["frames"])),
+                     "vertices": [int(min(a["vertices"], default=0)), int(max(a["vertices"], default=0))],
+                     "penetration_mean": float(pen.mean()), "penetration_worst_frame": float(pen.max()),
+                     "stretch_p99_median_frame": float(np.median(a["stretch_p99"])) if a["stretch_p99"] else 0.0,
+                     "stretch_max": float(max(a["stretch_max"], default=0.0)),
+                     "s_per_frame_median": float(np.nanmedian(a["s_per_frame"])) if a["s_per_frame"] else 0.0})
+    floor = floor_report(root)
+    lines = ["| split | kept | rejected | evaluated frames | vertices | inside body: mean / worst frame | "
+             "stretch: median frame's p99 / max | s/frame |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['split']} | {r['kept']} | {r['rejected']} | {r['frames']} | "
+                     f"{r['vertices'][0]}-{r['vertices'][1]} | {100 * r['penetration_mean']:.2f}% / "
+                     f"{100 * r['penetration_worst_frame']:.2f}% | {r['stretch_p99_median_frame']:.3f} / "
+                     f"{r['stretch_max']:.2f} | {r['s_per_frame_median']:.2f} |")
+    if floor:
+        lines += ["", "Per-frame error floor (moving garment against the same pose held until settled):", "",
+                  "| sequence | frame | mean mm | p95 mm | max mm | last held step mm |", "|---|---:|---:|---:|---:|---:|"]
+        lines += [f"| {f['sequence']} | {f['frame']} | {f['mean_mm']:.2f} | {f['p95_mm']:.2f} | {f['max_mm']:.2f} | "
+                  f"{f['settle_mm']:.2f} |" for f in floor["frames"]]
+        lines += ["", f"All held frames: mean {floor['mean_mm']:.2f} mm, p95 {floor['p95_mm']:.2f} mm."]
+    text = "\n".join(lines) + "\n"
+    (out / "quality.md").write_text(text)
+    (out / "quality.json").write_text(json.dumps({"splits": rows, "floor": floor}, indent=1))
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
