@@ -12,7 +12,7 @@ cache [mm] (per vertex, max and mean over all frames and vertices) of:
   JSON), positions decoded from the files as the stock VAT 3.0 soft-body shader does.
 
 Run: OMP_NUM_THREADS=1 python bench/bench_convert.py --out /tmp/bench_convert \\
-         --bvh /work/shared/data/mocap/cmu-mb2_chrystianosaraujo-motion-viewer/05/05_18.bvh
+         --bvh MOCAP/cmu-mb2_chrystianosaraujo-motion-viewer/05/05_18.bvh
 """
 
 from __future__ import annotations
