@@ -44,7 +44,9 @@ class GarmentScale:
     """How a garment's rest points sit on its body's rest skeleton."""
 
     diagonal: float
-    """The garment's bounding-box diagonal [m]."""
+    """The diagonal of the garment's bounding box [m], taken over the 1st to 99th percentile
+    of its vertices on each axis: a stray vertex or two (a garment of loose pieces) does not
+    make it huge, a garment in the wrong units still is."""
     body_height: float
     """The body's height [m], estimated from its head and ankle joints."""
     distance: float
@@ -76,7 +78,8 @@ def garment_scale(rest_points: np.ndarray, rest_joints: np.ndarray) -> GarmentSc
     joints = np.asarray(rest_joints, dtype=np.float64)
     if points.shape[0] == 0:
         return GarmentScale(0.0, 1.0, float("inf"))
-    diagonal = float(np.linalg.norm(points.max(0) - points.min(0)))
+    lo, hi = np.percentile(points, [1.0, 99.0], axis=0)
+    diagonal = float(np.linalg.norm(hi - lo))
     height = HEIGHT_PER_HEAD_ANKLE * float(np.linalg.norm(joints[_HEAD] - joints[_ANKLES].mean(0)))
     sample = points[:: max(1, points.shape[0] // _SAMPLE)]
     child = np.arange(1, len(PARENTS))
