@@ -16,6 +16,7 @@ Run: python bench/bench_own_garment.py --testset DATA [--mocap DIR --motions con
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import subprocess
 import sys
@@ -41,7 +42,7 @@ def garment_stage(path: Path, config_path: Path, body_name: str = "slim") -> tup
     config = load_config(config_path)
     variant = tshirt_variants(config.shirts, seed=config.seed)[config.test_shirts[0]]
     if config.garment_vertices:
-        variant = type(variant)(**{**variant.__dict__, "target_vertices": config.garment_vertices})
+        variant = dataclasses.replace(variant, target_vertices=config.garment_vertices)
     body = load_body_model()
     betas = body_shapes([body_name])[0].betas
     _, joints = shape_body(body, betas)

@@ -426,7 +426,7 @@ def _train(args: argparse.Namespace) -> int:
     else:
         result = train(args.tier, args.data, args.out, config, coarse_run=coarse_run, device=args.device,
                        resume=args.resume, body=_body(args.body_model), progress=show)
-    best = next((r for r in result.history if r.epoch == result.best_epoch), result.history[-1])
+    best = result.best
     sys.stdout.write(f"{args.tier}: best epoch {result.best_epoch + 1} (val {best.val_loss:.4g}, {best.val_mm:.3f} {mm}); "
                      f"run in {result.run_dir} (best.pt, history.csv, curve.png)\n")
     return 0
@@ -471,7 +471,7 @@ def _train_garment(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .core.body import load_body_model, shape_body
-    from .core.frames import rest_orientation
+    from .core.frames import canonical_rest_points, rest_orientation
     from .errors import ArgumentError
     from .nn.own_garment import OwnGarmentPlan, train_own_garment
     from .usd.read import open_stage, read_scene
@@ -493,8 +493,8 @@ def _train_garment(args: argparse.Namespace) -> int:
     char = next(c for c in scene.characters if c.prim_path == garment.body_path)
     body = load_body_model()
     joints = shape_body(body, char.betas)[1]
-    turn = rest_orientation(char.rest_joints, joints)
-    rest = (garment.rest_points - char.rest_root_position) @ turn + joints[0]
+    rest = canonical_rest_points(garment.rest_points, char.rest_root_position,
+                                 rest_orientation(char.rest_joints, joints), joints)
     if args.threads:
         import torch
 

@@ -16,7 +16,7 @@ from .rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from .scene import Character, Motion
 from .smpl import NUM_JOINTS
 
-__all__ = ["body_frame", "rest_orientation", "reorient_poses", "CanonicalMotion", "canonical_motion"]
+__all__ = ["body_frame", "rest_orientation", "reorient_poses", "CanonicalMotion", "canonical_motion", "canonical_rest_points"]
 
 _PELVIS, _L_HIP, _R_HIP, _NECK, _L_SHOULDER, _R_SHOULDER = 0, 1, 2, 12, 16, 17
 
@@ -89,7 +89,23 @@ class CanonicalMotion:
         Returns:
             (N, 3) float64 [m], canonical body frame.
         """
-        return (world_points - self.rest_root_position) @ self.turn + self.joints[0]
+        return canonical_rest_points(world_points, self.rest_root_position, self.turn, self.joints)
+
+
+def canonical_rest_points(world_points: np.ndarray, rest_root_position: np.ndarray, turn: np.ndarray,
+                          joints: np.ndarray) -> np.ndarray:
+    """World rest points (a garment worn at rest) in the canonical body frame: the rest
+    pelvis moved onto ``J(betas)[0]`` and the world turn undone.
+
+    Args:
+        world_points: (N, 3) [m], internal world frame.
+        rest_root_position: (3,) the rest pelvis in the world [m].
+        turn: (3, 3) the character's world turn at rest (:func:`rest_orientation`).
+        joints: (J, 3) the body model's ``J(betas)`` [m].
+    Returns:
+        (N, 3) float64 [m], canonical body frame.
+    """
+    return (np.asarray(world_points, dtype=np.float64) - rest_root_position) @ turn + joints[0]
 
 
 def canonical_motion(character: Character, motion: Motion, joints: np.ndarray) -> CanonicalMotion:

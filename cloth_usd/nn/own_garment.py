@@ -102,8 +102,7 @@ def _write_json(path: Path, data: dict) -> None:
 
 
 def _best(result) -> tuple[float, float]:
-    r = next((r for r in result.history if r.epoch == result.best_epoch), result.history[-1])
-    return float(r.val_loss), float(r.val_mm)
+    return float(result.best.val_loss), float(result.best.val_mm)
 
 
 def train_own_garment(vertices: np.ndarray, faces: np.ndarray, betas: np.ndarray, out_dir: str | Path, *,

@@ -195,6 +195,11 @@ class TrainResult:
     model: CoarseGenerator | DetailGenerator
     """The last epoch's model (the best one is in ``best.pt``)."""
 
+    @property
+    def best(self) -> EpochRecord:
+        """The best epoch's record (the last one when no epoch is marked best)."""
+        return next((r for r in self.history if r.epoch == self.best_epoch), self.history[-1])
+
 
 def write_history(run_dir: Path, history: Sequence[EpochRecord]) -> None:
     rows = [dataclasses.asdict(r) for r in history]
