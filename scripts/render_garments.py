@@ -23,6 +23,8 @@ SITE = Path(bpy.utils.resource_path("LOCAL")) / "python" / "lib" / "python3.11" 
 sys.path.append(str(SITE))  # Blender's own pxr
 sys.path.insert(0, str(ROOT))
 
+from render_tiers import save_row, studio  # noqa: E402  (the same studio as the tier close-ups)
+
 
 def _material(name: str, rgb, checker: bool) -> bpy.types.Material:
     mat = bpy.data.materials.new(name)
@@ -83,29 +85,7 @@ def main(argv: list[str]) -> None:
     out = Path(argv[0])
     panels = [a.split("=", 1) for a in argv[1:]]
     colours = [(0.12, 0.28, 0.62), (0.55, 0.12, 0.16), (0.15, 0.38, 0.22), (0.35, 0.3, 0.12)]
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = 24
-    scene.render.resolution_x, scene.render.resolution_y = 360, 560
-    world = bpy.data.worlds.new("World")
-    if world.node_tree is None:
-        world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.85, 0.86, 0.88, 1.0)
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.6
-    scene.world = world
-    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
-    sun.data.energy = 3.5
-    sun.rotation_euler = (0.9, 0.1, -0.7)
-    scene.collection.objects.link(sun)
-    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    camera.data.lens = 50
-    target = bpy.data.objects.new("Target", None)
-    camera.constraints.new("TRACK_TO").target = target
-    scene.collection.objects.link(camera)
-    scene.collection.objects.link(target)
-    scene.camera = camera
+    scene, camera, target = studio(samples=24, width=360, height=560, lens=50)
     tmp = Path(tempfile.mkdtemp(prefix="cloth_usd_garments_"))
     images = []
     for k, (label, path) in enumerate(panels):
@@ -124,13 +104,7 @@ def main(argv: list[str]) -> None:
         bpy.data.objects.remove(cloth)
         bpy.data.objects.remove(body)
         print(f"{label}: rendered", flush=True)
-    w, h = scene.render.resolution_x, scene.render.resolution_y
-    pixels = np.concatenate([np.array(im.pixels[:]).reshape(h, w, 4) for im in images], axis=1)
-    img = bpy.data.images.new("garments", w * len(images), h)
-    img.pixels[:] = pixels.ravel()
-    img.filepath_raw = str(out.resolve())
-    img.file_format = "PNG"
-    img.save()
+    save_row(scene, images, out)
     print(f"wrote {out} ({', '.join(label for label, _ in panels)})")
 
 

@@ -24,6 +24,46 @@ sys.path.append(str(SITE))  # Blender's own pxr
 sys.path.insert(0, str(ROOT))
 
 
+def studio(*, samples: int, width: int, height: int, lens: float):
+    """An empty Cycles scene (CPU) with a pale grey sky, a grazing sun from the upper left
+    (folds cast shade) and a camera that tracks an empty; returns ``(scene, camera, target)``."""
+    bpy.ops.wm.read_factory_settings(use_empty=True)
+    scene = bpy.context.scene
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "CPU"
+    scene.cycles.samples = samples
+    scene.render.resolution_x, scene.render.resolution_y = width, height
+    world = bpy.data.worlds.new("World")
+    if world.node_tree is None:
+        world.use_nodes = True
+    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.85, 0.86, 0.88, 1.0)
+    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.6
+    scene.world = world
+    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
+    sun.data.energy = 3.5
+    sun.rotation_euler = (0.9, 0.1, -0.7)
+    scene.collection.objects.link(sun)
+    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
+    camera.data.lens = lens
+    target = bpy.data.objects.new("Target", None)
+    camera.constraints.new("TRACK_TO").target = target
+    scene.collection.objects.link(camera)
+    scene.collection.objects.link(target)
+    scene.camera = camera
+    return scene, camera, target
+
+
+def save_row(scene, images: list, out: Path) -> None:
+    """The rendered panels ``images`` (bpy images of the scene's resolution) side by side, as a PNG."""
+    w, h = scene.render.resolution_x, scene.render.resolution_y
+    pixels = np.concatenate([np.array(im.pixels[:]).reshape(h, w, 4) for im in images], axis=1)
+    img = bpy.data.images.new(out.stem, w * len(images), h)
+    img.pixels[:] = pixels.ravel()
+    img.filepath_raw = str(out.resolve())
+    img.file_format = "PNG"
+    img.save()
+
+
 def _mesh(name: str, verts: np.ndarray, faces: np.ndarray, rgb) -> bpy.types.Object:
     mesh = bpy.data.meshes.new(name)
     mesh.from_pydata(verts.tolist(), [], faces.tolist())
@@ -64,29 +104,7 @@ def main(argv: list[str]) -> None:
     garment = next(g for g in scene_data.garments if g.enabled)
     ((body_verts, body_faces),) = posed_bodies(stage, scene_data, [frame])
 
-    bpy.ops.wm.read_factory_settings(use_empty=True)
-    scene = bpy.context.scene
-    scene.render.engine = "CYCLES"
-    scene.cycles.device = "CPU"
-    scene.cycles.samples = 32
-    scene.render.resolution_x, scene.render.resolution_y = 420, 520
-    world = bpy.data.worlds.new("World")
-    if world.node_tree is None:
-        world.use_nodes = True
-    world.node_tree.nodes["Background"].inputs["Color"].default_value = (0.85, 0.86, 0.88, 1.0)
-    world.node_tree.nodes["Background"].inputs["Strength"].default_value = 0.6
-    scene.world = world
-    sun = bpy.data.objects.new("Sun", bpy.data.lights.new("Sun", "SUN"))
-    sun.data.energy = 3.5
-    sun.rotation_euler = (0.9, 0.1, -0.7)  # grazing from the upper left: folds cast shade
-    scene.collection.objects.link(sun)
-    camera = bpy.data.objects.new("Camera", bpy.data.cameras.new("Camera"))
-    camera.data.lens = 60
-    target = bpy.data.objects.new("Target", None)
-    camera.constraints.new("TRACK_TO").target = target
-    scene.collection.objects.link(camera)
-    scene.collection.objects.link(target)
-    scene.camera = camera
+    scene, camera, target = studio(samples=32, width=420, height=520, lens=60)
     body = _mesh("Body", body_verts[0], body_faces, (0.8, 0.62, 0.52))
     # chest height, from the front-left (Blender Z-up: cloth_usd's y is Blender's z)
     chest = body_verts[0][body_verts[0][:, 1] > np.quantile(body_verts[0][:, 1], 0.6)].mean(axis=0)
@@ -105,13 +123,7 @@ def main(argv: list[str]) -> None:
         bpy.data.objects.remove(shirt)
         print(f"{label}: rendered", flush=True)
     del body
-    w, h = scene.render.resolution_x, scene.render.resolution_y
-    pixels = np.concatenate([np.array(im.pixels[:]).reshape(h, w, 4) for im in images], axis=1)
-    img = bpy.data.images.new("tiers", w * len(images), h)
-    img.pixels[:] = pixels.ravel()
-    img.filepath_raw = str(out.resolve())
-    img.file_format = "PNG"
-    img.save()
+    save_row(scene, images, out)
     print(f"wrote {out} ({', '.join(label for label, _ in panels)}, time code {frame:g})")
 
 
