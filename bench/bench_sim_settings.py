@@ -35,7 +35,7 @@ from cloth_usd.core.body import load_body_model, shape_body
 from cloth_usd.datagen import TShirtParams, make_tshirt
 from cloth_usd.datagen.mocap import MocapSpec, mocap_motion
 from cloth_usd.datagen.floor import held_frames, held_motion
-from cloth_usd.datagen.simulate import SimConfig, drape, simulate, unique_edges
+from cloth_usd.datagen.simulate import SimConfig, drape, edge_ratios, simulate, unique_edges
 
 #: name -> SimConfig overrides of the default; the first is the reference.
 SETTINGS = {
@@ -61,8 +61,7 @@ def _row(name: str, r, ref, warmup: int, edges, rest) -> dict:
         d = np.linalg.norm(x - ref.positions[warmup:], axis=-1) * 1e3
         row.update(mean_mm=float(d.mean()), p95_mm=float(np.percentile(d, 95)))
     row["penetration"] = float(np.mean(r.penetration[warmup:]))
-    rest_len = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1)
-    ratio = np.linalg.norm(x[:, edges[:, 1]] - x[:, edges[:, 0]], axis=2) / np.maximum(rest_len, 1e-12)
+    ratio = edge_ratios(x, rest, edges)
     row["stretch_p99"] = float(np.median(np.percentile(ratio, 99, axis=1)))  # the median frame's
     row["stretch_max"] = float(ratio.max())
     return row

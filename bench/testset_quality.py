@@ -21,7 +21,7 @@ import numpy as np
 
 from cloth_usd.core.shards import Manifest, read_shard
 from cloth_usd.datagen.floor import FLOOR_SPLIT, floor_report
-from cloth_usd.datagen.simulate import unique_edges
+from cloth_usd.datagen.simulate import edge_ratios, unique_edges
 
 
 def main(argv=None) -> int:
@@ -48,8 +48,7 @@ def main(argv=None) -> int:
         x = shard.positions[warm:].astype(np.float64)
         rest = shard.garment_vertices.astype(np.float64)
         edges = unique_edges(shard.garment_faces)
-        rest_len = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1)
-        ratio = np.linalg.norm(x[:, edges[:, 1]] - x[:, edges[:, 0]], axis=2) / np.maximum(rest_len, 1e-12)
+        ratio = edge_ratios(x, rest, edges)
         a["kept"].append(name)
         a["frames"].append(x.shape[0])
         a["vertices"].append(rest.shape[0])

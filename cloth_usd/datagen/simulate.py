@@ -45,6 +45,7 @@ __all__ = [
     "drape",
     "penetration_fraction",
     "edge_stretch",
+    "edge_ratios",
     "engine_versions",
     "resolve_device",
 ]
@@ -371,20 +372,30 @@ def unique_edges(faces: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(e, axis=1), axis=0).astype(np.int64)
 
 
-def edge_stretch(positions: np.ndarray, rest: np.ndarray, edges: np.ndarray) -> np.ndarray:
-    """Largest edge length ratio (current / rest) per frame.
+def edge_ratios(positions: np.ndarray, rest: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Every edge's length over its rest length, per frame.
 
     Args:
         positions: (T, N, 3) [m].
         rest: (N, 3) [m].
         edges: (E', 2) int.
     Returns:
-        (T,) float64.
+        (T, E') float64 (NaN where a position is not finite).
     """
     rest_len = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1)
     cur = np.linalg.norm(positions[:, edges[:, 1]] - positions[:, edges[:, 0]], axis=2)
     with np.errstate(invalid="ignore"):
-        ratio = cur / np.maximum(rest_len, 1e-12)
+        return cur / np.maximum(rest_len, 1e-12)
+
+
+def edge_stretch(positions: np.ndarray, rest: np.ndarray, edges: np.ndarray) -> np.ndarray:
+    """Largest edge length ratio (current / rest) per frame (:func:`edge_ratios`), inf for a
+    frame with a non-finite position.
+
+    Returns:
+        (T,) float64.
+    """
+    ratio = edge_ratios(positions, rest, edges)
     return np.max(np.where(np.isfinite(ratio), ratio, np.inf), axis=1)
 
 
