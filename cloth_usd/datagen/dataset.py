@@ -173,12 +173,18 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
         manifest = Manifest.read(out, manifest_name)
     except DatasetError:
         manifest = Manifest(config={}, dataset={}, engine={})
+    earlier = {}  # what an interrupted run merged into the data set's manifest (workers' runs)
+    if manifest_name != MANIFEST_NAME:
+        try:
+            earlier = Manifest.read(out).sequences
+        except DatasetError:
+            pass
     manifest.config, manifest.dataset, manifest.engine = config.to_json(), dict(dataset.__dict__), engine_versions()
     for job in jobs:
         _check_name(job.name)
         digest = job.digest(config, dataset)
         path = out / f"{job.name}.npz"
-        prior = manifest.sequences.get(job.name)
+        prior = manifest.sequences.get(job.name) or earlier.get(job.name)
         if prior and prior.get("digest") == digest and prior["status"] == "rejected":
             log.info("%s: rejected before with the same inputs, skipped", job.name)
             continue

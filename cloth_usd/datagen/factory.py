@@ -27,7 +27,7 @@ from ..core.fit import FitModel, common_anchors, fit_factor_analysis, pair_dista
 from ..errors import ArgumentError
 from ..core.transfer import transfer_garment
 from .bodies import BodyShape, body_shapes
-from .dataset import MANIFEST_NAME, DatasetConfig, Job, Manifest, run_jobs
+from .dataset import MANIFEST_NAME, DatasetConfig, DatasetError, Job, Manifest, run_jobs
 from .floor import FLOOR_SPLIT, FloorSpec, floor_jobs
 from .mocap import MocapSpec, mocap_motion
 from .simulate import SimConfig
@@ -376,9 +376,25 @@ def drape_pairs(jobs: list[Job], out_dir: str | Path, sim: dict, *, workers: int
     return out, failed
 
 
+def _merge_worker_manifests(out: Path) -> Manifest:
+    """Fold every ``manifest.worker-*.json`` in ``out`` (this run's, or those a killed run
+    left) into the data set's manifest, and remove them."""
+    try:
+        merged = Manifest.read(out)
+    except DatasetError:  # no earlier manifest
+        merged = Manifest(config={}, dataset={}, engine={})
+    for path in sorted(out.glob("manifest.worker-*.json")):
+        part = Manifest.read(out, path.name)
+        merged.sequences.update(part.sequences)
+        merged.config, merged.dataset, merged.engine = part.config, part.dataset, part.engine
+        path.unlink()
+    return merged
+
+
 def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1) -> Manifest:
-    """Plan, drape every pair to be simulated, simulate (in ``workers`` processes), merge
-    manifests, fit alpha. Resumable."""
+    """Plan, drape every pair to be simulated, fit alpha, simulate (in ``workers``
+    processes), merge the workers' manifests. Resumable: the manifest is merged even when the
+    run is interrupted, and a run killed outright leaves worker manifests the next run folds in."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     body = load_body_model()
@@ -392,40 +408,33 @@ def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1)
     draped = {_pair(j): j.garment_vertices for j in wanted}
     jobs = [dataclasses.replace(j, garment_vertices=draped[_pair(j)]) if _pair(j) in draped else j
             for j in planned if _pair(j) not in drape_failed]
+    # The fit does not depend on what the simulation makes, so it comes first: a run that is
+    # interrupted still leaves a manifest ``cloth-usd evaluate`` reads.
+    model, alphas = fit_training_pairs(jobs, body)
+    model.save(out / "fit.npz")
     workers = max(1, min(workers, len(wanted)))
     names = [f"manifest.worker-{k}.json" for k in range(workers)]
     parts = [(wanted[k::workers], out, config.sim, config.dataset, names[k]) for k in range(workers)]
-    if workers == 1:
-        _worker(parts[0])
-    else:
-        with ProcessPoolExecutor(max_workers=workers) as pool:
-            list(pool.map(_worker, parts))
     try:
-        merged = Manifest.read(out)
-    except Exception:  # no earlier manifest
-        merged = None
-    for name in names:
-        part = Manifest.read(out, name)
-        if merged is None:
-            merged = part
-        merged.sequences.update(part.sequences)
-        merged.config, merged.dataset, merged.engine = part.config, part.dataset, part.engine
-        (out / name).unlink()
-    if merged is None:
-        merged = Manifest(config={}, dataset={}, engine={})
-    for job in planned:
-        if config.simulate_splits is not None and job.meta["split"] not in (*config.simulate_splits, FLOOR_SPLIT):
-            continue
-        if _pair(job) in drape_failed:
-            merged.sequences[job.name] = {"status": "rejected", "shard": None, "seed": int(job.seed),
-                                          "digest": None, "meta": job.meta,
-                                          "quality": {"stable": False, "failure": drape_failed[_pair(job)]}}
-    model, alphas = fit_training_pairs(jobs, body)
-    model.save(out / "fit.npz")
-    for job in jobs:
-        entry = merged.sequences.get(job.name)
-        if entry is not None:
-            entry["split"] = job.meta["split"]
-            entry["alpha"] = alphas[f"shirt{job.meta['shirt']}.{job.meta['body']}"]
-    merged.write(out, MANIFEST_NAME)
+        if workers == 1:
+            _worker(parts[0])
+        else:
+            with ProcessPoolExecutor(max_workers=workers) as pool:
+                list(pool.map(_worker, parts))
+    finally:
+        merged = _merge_worker_manifests(out)
+        for job in planned:
+            if config.simulate_splits is not None and job.meta["split"] not in (*config.simulate_splits,
+                                                                                 FLOOR_SPLIT):
+                continue
+            if _pair(job) in drape_failed:
+                merged.sequences[job.name] = {"status": "rejected", "shard": None, "seed": int(job.seed),
+                                              "digest": None, "meta": job.meta,
+                                              "quality": {"stable": False, "failure": drape_failed[_pair(job)]}}
+        for job in jobs:
+            entry = merged.sequences.get(job.name)
+            if entry is not None:
+                entry["split"] = job.meta["split"]
+                entry["alpha"] = alphas[f"shirt{job.meta['shirt']}.{job.meta['body']}"]
+        merged.write(out, MANIFEST_NAME)
     return merged

@@ -151,3 +151,13 @@ def test_write_shard_is_atomic_and_read_rejects_junk(tmp_path, body):
     with pytest.raises(DatasetError, match="coarse_lambda"):
         DatasetConfig(coarse_lambda=0.0)
     assert Manifest.read(tmp_path).accepted == ["job0"]
+
+
+def test_a_worker_skips_what_an_interrupted_run_merged(tmp_path, body):
+    """Parallel workers keep their own manifests; after an interruption they are merged into
+    the data set's, and a worker of the next run must still know a rejected sequence."""
+    jobs, cfg = _jobs(body), SimConfig(substeps=2)
+    run_jobs(jobs, tmp_path, cfg, body=body, simulator=FakeSim(unstable={50}))  # the merged manifest
+    again = FakeSim(unstable={50})
+    run_jobs(jobs, tmp_path, cfg, body=body, simulator=again, manifest_name="manifest.worker-0.json")
+    assert again.calls == []

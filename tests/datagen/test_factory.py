@@ -80,3 +80,42 @@ def test_tiny_factory_run(tmp_path):
     example = coarse_example(load_body_model(), clip, np.arange(2))
     assert example.features.shape[:2] == example.target.shape[:2] == (2, clip.rest_points.shape[0])
     assert np.all(np.isfinite(example.features)) and np.all(np.isfinite(example.target))
+
+
+def test_an_interrupted_run_leaves_a_merged_manifest_and_resumes(tmp_path, monkeypatch):
+    """Ctrl-C (or a worker dying) mid-run: the sequences done so far, the rejections and the
+    fit are in manifest.json, no worker manifest is left, and the next run does only the rest."""
+    from cloth_usd.datagen import factory
+    from cloth_usd.datagen.dataset import DatasetConfig, run_jobs
+    from cloth_usd.datagen.simulate import SimConfig
+    from tests.datagen.test_dataset import FakeSim
+
+    monkeypatch.setattr(factory, "drape_pairs", lambda jobs, out, sim, workers=1: (jobs, {}))
+    calls = []
+
+    def worker(args, stop_after=None):
+        jobs, out_dir, sim, dataset, name = args
+        fake = FakeSim()
+        run_jobs(jobs[:stop_after], out_dir, SimConfig(**sim), dataset=DatasetConfig(**dataset),
+                 manifest_name=name, simulator=fake)
+        calls.extend(fake.calls)
+        if stop_after is not None:
+            raise KeyboardInterrupt
+
+    config = FactoryConfig(**{**TINY, "simulate_splits": ["test_body", "test_garment"]})
+    out = tmp_path / "data"
+    monkeypatch.setattr(factory, "_worker", lambda args: worker(args, stop_after=1))
+    with pytest.raises(KeyboardInterrupt):
+        factory.run_factory(config, out)
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert not list(out.glob("manifest.worker-*.json")) and (out / "fit.npz").exists()
+    assert len(manifest["sequences"]) == 1 == len(calls)
+    (done,) = manifest["sequences"].values()
+    assert done["status"] == "ok" and len(done["alpha"]) == 3
+
+    calls.clear()
+    monkeypatch.setattr(factory, "_worker", worker)
+    merged = factory.run_factory(config, out)
+    planned = [j for j in plan_jobs(config) if j.meta["split"] in ("test_body", "test_garment")]
+    assert set(merged.sequences) == {j.name for j in planned}
+    assert len(calls) == len(planned) - 1  # the interrupted run's sequence is not redone
