@@ -32,6 +32,22 @@ def register(add_command: Callable[..., argparse.ArgumentParser]) -> None:
     mk.add_argument("--report", metavar="JSON", help="also write the measurements and figures as JSON")
     mk.add_argument("--force", action="store_true", help="replace an existing output file")
     sub.add_parser("presets", help="list the named cuts and every design parameter with its default")
+    fit = sub.add_parser("fit", help="bring a garment modelled elsewhere (.obj, .glb, .usd) onto the body: "
+                                     "units, up axis, alignment, unposed to the T-pose, pushed out, draped")
+    fit.add_argument("mesh", help="garment mesh: .obj, .glb/.gltf, .usd/.usda/.usdc (a MakeHuman .obj uses "
+                                  "the .mhclo beside it)")
+    fit.add_argument("-o", "--output", required=True, help="garment file to write (.usda, .usdc, .usd)")
+    fit.add_argument("--category", required=True, choices=list(DESIGNS), help="garment category")
+    fit.add_argument("--betas", type=float, nargs="+", default=[], metavar="B",
+                     help="body shape coefficients (up to 10; default zeros)")
+    fit.add_argument("--mhclo", help="MakeHuman binding (default: MESH with the suffix .mhclo, if present)")
+    fit.add_argument("--no-mhclo", action="store_true", help="ignore a MakeHuman binding: fit by shape")
+    fit.add_argument("--prim", help="the Mesh prim to read from a USD file (default: the first Mesh)")
+    fit.add_argument("--drape-frames", type=int, default=16,
+                     help="frames (24 fps) hung under gravity on the body (default 16; 0: no drape)")
+    fit.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder (default: embedded)")
+    fit.add_argument("--report", metavar="JSON", help="also write how it was fitted as JSON")
+    fit.add_argument("--force", action="store_true", help="replace an existing output file")
 
 
 def _parse_params(items: list[str]) -> dict[str, str]:
@@ -60,10 +76,69 @@ def _presets() -> int:
     return 0
 
 
+def _betas(values: list[float]):
+    import numpy as np
+
+    from ..errors import ArgumentError
+
+    if len(values) > 10 or not all(np.isfinite(values)):
+        raise ArgumentError(f"--betas: at most 10 finite values, got {len(values)}")
+    betas = np.zeros(10)
+    betas[: len(values)] = values
+    return betas
+
+
+def _fit(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    import numpy as np
+
+    from ..core.body import load_body_model
+    from ..errors import ArgumentError
+    from ..usd.garment_file import write_garment_file
+    from ..usd.write import check_output_path
+    from .fit import FitConfig, fit_garment, mhclo_beside
+    from .make import body_joints
+    from .mhclo import read_mhclo
+    from .source import read_garment_mesh
+
+    betas = _betas(args.betas)
+    if args.drape_frames < 0:
+        raise ArgumentError(f"--drape-frames {args.drape_frames}: 0 or more")
+    check_output_path(args.output, force=args.force)
+    if args.prim and Path(args.mesh).suffix.lower() in (".usd", ".usda", ".usdc"):
+        from ..usd.mesh_read import read_usd_mesh
+
+        src = read_usd_mesh(args.mesh, args.prim)
+    else:
+        src = read_garment_mesh(args.mesh)
+    binding = None if args.no_mhclo else (Path(args.mhclo) if args.mhclo else mhclo_beside(args.mesh))
+    mhclo = read_mhclo(binding) if binding is not None else None
+    body = load_body_model(args.body_model)
+    fitted = fit_garment(src, args.category, betas, body=body, mhclo=mhclo,
+                         config=FitConfig(drape_frames=args.drape_frames))
+    report = {**fitted.report, "category": args.category, "betas": [float(b) for b in betas]}
+    faces = np.split(fitted.face_indices, np.cumsum(fitted.face_counts)[:-1])
+    path = write_garment_file(args.output, points=fitted.points, faces=faces, st=fitted.uv,
+                              st_indices=fitted.uv_indices, category=args.category, betas=betas,
+                              joints=body_joints(body, betas), custom={"garment_fit": json.dumps(report)},
+                              force=args.force)
+    if args.report:
+        with open(args.report, "w", encoding="utf-8") as f:
+            json.dump(report, f, indent=2)
+    sys.stdout.write(f"wrote {path}: {args.category} fitted by {report['method']} "
+                     f"({report['units_m']:g} m per unit, {report['up_axis']} up, arm pose {report['arm_pose']:g}), "
+                     f"{report['vertices']} vertices, median {report['median_distance_mm']:.1f} mm from the body, "
+                     f"{100 * report['inside_fraction']:.1f}% inside, {report['seconds']:.0f} s\n")
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Run ``cloth-usd garment ...``; returns the exit code."""
     if args.garment_command == "presets":
         return _presets()
+    if args.garment_command == "fit":
+        return _fit(args)
     import numpy as np
 
     from ..core.body import load_body_model

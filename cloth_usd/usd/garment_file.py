@@ -22,17 +22,18 @@ from .write import _temp_path, check_output_path
 __all__ = ["write_garment_file"]
 
 
-def write_garment_file(path: str | Path, *, points: np.ndarray, faces: np.ndarray, st: np.ndarray,
-                       st_indices: np.ndarray, category: str, betas: np.ndarray, joints: np.ndarray,
+def write_garment_file(path: str | Path, *, points: np.ndarray, faces, st: np.ndarray | None,
+                       st_indices: np.ndarray | None, category: str, betas: np.ndarray, joints: np.ndarray,
                        prim_name: str | None = None, custom: Mapping | None = None,
                        force: bool = False) -> Path:
     """Author ``/Character/Skeleton`` (rest pose) and ``/Character/<Category>`` into a new layer.
 
     Args:
         points: (K, 3) float garment worn at rest [m], canonical body frame (Y up, metres).
-        faces: (M, 3) int triangles.
-        st: (N, 2) float UV coordinates in [0, 1].
-        st_indices: (M, 3) int the UV index of each triangle corner (face-varying).
+        faces: (M, 3) int triangles, or a list of polygons (each >= 3 vertex indices).
+        st: (N, 2) float UV coordinates, or None for no ``primvars:st``.
+        st_indices: (M, 3) int the UV index of each triangle corner, or (C,) of each polygon
+            corner in order (face-varying).
         betas: (10,) the body's shape; joints: (24, 3) its rest joints [m].
         custom: JSON-able values for the layer's ``customLayerData`` (how it was made).
         force: replace an existing file.
@@ -48,11 +49,12 @@ def write_garment_file(path: str | Path, *, points: np.ndarray, faces: np.ndarra
         name = prim_name or category.capitalize()
         mesh_path = author_garment(stage, f"/Character/{name}", points=points, faces=faces, category=category,
                                    body_path=skel)
-        mesh = UsdGeom.Mesh(stage.GetPrimAtPath(mesh_path))
-        primvar = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
-                                                          UsdGeom.Tokens.faceVarying)
-        primvar.Set(Vt.Vec2fArray.FromNumpy(np.asarray(st, dtype=np.float32)))
-        primvar.SetIndices(Vt.IntArray.FromNumpy(np.asarray(st_indices, dtype=np.int32).ravel()))
+        if st is not None:
+            mesh = UsdGeom.Mesh(stage.GetPrimAtPath(mesh_path))
+            primvar = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray,
+                                                              UsdGeom.Tokens.faceVarying)
+            primvar.Set(Vt.Vec2fArray.FromNumpy(np.asarray(st, dtype=np.float32)))
+            primvar.SetIndices(Vt.IntArray.FromNumpy(np.asarray(st_indices, dtype=np.int32).ravel()))
         stage.SetDefaultPrim(stage.GetPrimAtPath("/Character"))
         if custom:
             stage.GetRootLayer().customLayerData = {"cloth_usd": dict(custom)}

@@ -1,0 +1,327 @@
+"""Bring a garment modelled elsewhere onto the body: ``cloth-usd garment fit``.
+
+1. **Units and up axis.** From the file when it says (USD ``metersPerUnit`` / ``upAxis``,
+   glTF: metres, Y up); otherwise (OBJ) the unit among m, dm, cm, mm and inch that makes
+   the garment's size nearest a worn garment's for this body, and both Y-up and Z-up are
+   tried in the alignment.
+2. **Placement in the garment's own pose.** A MakeHuman garment with its ``.mhclo`` binding
+   is placed by the binding on our body posed into MakeHuman's rest pose
+   (:mod:`~cloth_usd.garments.mhclo`); its skinning weights are the body's at its bound
+   points. Any other garment is aligned rigidly (translation, after the units) to our
+   body in each of a few arm poses from the T-pose to MakeHuman's A-pose, and the pose it
+   lies closest to wins; its skinning weights are the body's at each vertex's closest
+   surface point, smoothed over the garment.
+3. **Unposed to the T-pose** through those weights (inverse linear blend skinning), moved
+   out of the body (:func:`~cloth_usd.garments.sew.push_out`) and draped under gravity on
+   the T-posed body with Newton, its rest shape being its own unposed shape.
+
+Pieces (connected parts) of a mesh that belong to another category are dropped: a
+T-shirt keeps the parts whose centre lies above the hips, trousers the parts below the
+chest. Shape letters: N garment vertices, C polygon corners, M triangles, J joints.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from scipy import sparse
+from scipy.spatial import cKDTree
+
+from ..core.association import associate
+from ..core.body import BodyModel, joint_transforms, lbs, shape_body
+from ..core.rotations import axis_angle_to_matrix
+from .mhclo import Mhclo, bind_mhclo, load_hm08_map, mhclo_applies
+from .source import GarmentFitError, SourceMesh
+
+__all__ = ["FitConfig", "FittedGarment", "fit_garment", "triangulate_polygons", "UNIT_CANDIDATES"]
+
+log = logging.getLogger(__name__)
+
+#: Metres per unit an OBJ may be in: m, dm, cm, mm, inch.
+UNIT_CANDIDATES = (1.0, 0.1, 0.01, 0.001, 0.0254)
+#: A worn garment's 98% box diagonal over its body's height (README: 0.44 to 0.95).
+_TYPICAL_SIZE = 0.7
+#: Z-up to Y-up: (x, y, z) -> (x, z, -y).
+_Z_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+#: SMPL joints used to place and split a garment.
+_PELVIS, _SPINE2, _NECK = 0, 6, 12
+
+
+@dataclass(frozen=True)
+class FitConfig:
+    """How a garment is fitted."""
+
+    arm_poses: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
+    """Fractions of MakeHuman's rest pose (0: T-pose, 1: MakeHuman's A-pose) tried for a
+    garment without a binding."""
+    icp_iterations: int = 20
+    """Translation updates of the rigid alignment."""
+    weight_smoothing: int = 10
+    """Passes of neighbour averaging of the skinning weights over the garment."""
+    clearance: float = 0.006
+    """Distance [m] a vertex is kept from the body's surface before the drape."""
+    drape_frames: int = 16
+    """Frames (24 fps) hanging under gravity on the T-posed body; 0 skips the drape."""
+    max_median_distance: float = 0.12
+    """A garment whose median vertex lies further [m] from the body after alignment is refused."""
+
+
+@dataclass(frozen=True)
+class FittedGarment:
+    """A garment fitted to the T-posed body."""
+
+    points: np.ndarray
+    """(N, 3) float64 worn at rest [m], canonical body frame."""
+    face_counts: np.ndarray
+    """(P,) int64 corners per polygon (the input's polygons, of the pieces kept)."""
+    face_indices: np.ndarray
+    """(C,) int64 vertex of each corner."""
+    uv: np.ndarray | None
+    """(U, 2) float64 the input's UVs, or None."""
+    uv_indices: np.ndarray | None
+    """(C,) int64 UV of each corner, or None."""
+    report: dict = field(default_factory=dict)
+    """JSON-able: how it was fitted (method, units, up axis, pose, distances, time)."""
+
+
+def triangulate_polygons(counts: np.ndarray, indices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Fan triangulation.
+
+    Args:
+        counts: (P,) int corners per polygon; indices: (C,) int vertex per corner.
+    Returns:
+        ``(triangles (M, 3) int64 vertices, polygon (M,) int64 the polygon each came from)``.
+    """
+    counts = np.asarray(counts, dtype=np.int64)
+    start = np.concatenate([[0], np.cumsum(counts)[:-1]])
+    tris, owner = [], []
+    for k in range(3, int(counts.max(initial=0)) + 1):
+        sel = np.flatnonzero(counts >= k)
+        if len(sel):
+            tris.append(np.stack([start[sel], start[sel] + k - 2, start[sel] + k - 1], axis=1))
+            owner.append(sel)
+    if not tris:
+        return np.zeros((0, 3), dtype=np.int64), np.zeros(0, dtype=np.int64)
+    corner = np.concatenate(tris)
+    return np.asarray(indices, dtype=np.int64)[corner], np.concatenate(owner)
+
+
+def _components(num: int, tri: np.ndarray) -> np.ndarray:
+    from scipy.sparse.csgraph import connected_components
+
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]]])
+    adj = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(num, num))
+    return connected_components(adj, directed=False)[1]
+
+
+def _box(points: np.ndarray) -> np.ndarray:
+    """(3,) the sides of the box holding 98% of the points."""
+    return np.percentile(points, 99, axis=0) - np.percentile(points, 1, axis=0)
+
+
+def _guess_unit(points: np.ndarray, height: float) -> float:
+    diag = float(np.linalg.norm(_box(points)))
+    ratios = [abs(np.log(max(diag * u, 1e-12) / (_TYPICAL_SIZE * height))) for u in UNIT_CANDIDATES]
+    return UNIT_CANDIDATES[int(np.argmin(ratios))]
+
+
+def _smooth_weights(weights: np.ndarray, tri: np.ndarray, passes: int) -> np.ndarray:
+    if passes <= 0 or not len(tri):
+        return weights
+    n = len(weights)
+    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    e = np.unique(np.sort(e, axis=1), axis=0)
+    adj = sparse.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                            shape=(n, n)).tocsr()
+    adj = adj + sparse.eye(n)
+    adj = sparse.diags(1.0 / np.asarray(adj.sum(axis=1)).ravel()) @ adj
+    for _ in range(passes):
+        weights = adj @ weights
+    return weights
+
+
+def _pose(body: BodyModel, v_shaped: np.ndarray, joints: np.ndarray, pose: np.ndarray) -> np.ndarray:
+    return lbs(body, v_shaped, joints, pose[None])[0][0]
+
+
+def _unpose(points: np.ndarray, weights: np.ndarray, joints: np.ndarray, pose: np.ndarray,
+            parents: np.ndarray) -> np.ndarray:
+    """(N, 3) points in ``pose`` carried back to the rest pose by inverse blend skinning."""
+    rot = axis_angle_to_matrix(pose.reshape(1, -1, 3))
+    _, skin = joint_transforms(rot, joints, parents)  # (1, J, 3, 4)
+    blended = np.einsum("nj,jab->nab", weights, skin[0])  # (N, 3, 4)
+    return np.linalg.solve(blended[:, :, :3], (points - blended[:, :, 3])[..., None])[..., 0]
+
+
+def _align(points: np.ndarray, category: str, posed: np.ndarray, joints: np.ndarray,
+           iterations: int) -> tuple[np.ndarray, float]:
+    """Translate a garment onto a posed body; ``(shift (3,) [m], score [m])``: the score is
+    the mean distance of the garment's vertices to the body's (clipped at 0.3 m)."""
+    tree = cKDTree(posed)
+    top = np.percentile(points[:, 1], 99)
+    anchor = joints[_NECK, 1] + 0.02 if category != "trousers" else joints[_PELVIS, 1] + 0.12
+    shift = np.array([-np.median(points[:, 0]), anchor - top, 0.0])
+    band = np.abs(posed[:, 1] - (np.median(points[:, 1]) + shift[1])) < 0.1
+    shift[2] = (np.median(posed[band, 2]) if np.any(band) else 0.0) - np.median(points[:, 2])
+    for _ in range(iterations):
+        d, i = tree.query(points + shift)
+        keep = d <= np.percentile(d, 80)
+        step = (posed[i[keep]] - (points[keep] + shift)).mean(axis=0)
+        shift = shift + step
+        if np.linalg.norm(step) < 1e-4:
+            break
+    d, _ = tree.query(points + shift)
+    return shift, float(np.mean(np.minimum(d, 0.3)))
+
+
+def _check_shape(src: SourceMesh, tri: np.ndarray) -> None:
+    name = src.source or "the mesh"
+    if src.num_vertices < 3 or not len(tri):
+        raise GarmentFitError(f"{name}: holds no polygons; a garment mesh is needed")
+    if not np.all(np.isfinite(src.points)):
+        raise GarmentFitError(f"{name}: has NaN or infinite vertex positions")
+    box = np.sort(_box(src.points[np.unique(tri)]))
+    if box[2] <= 0 or box[0] < 0.02 * box[2] or box[1] < 0.1 * box[2]:
+        raise GarmentFitError(f"{name}: is flat or a strip (its box is {box[0]:.3g} x {box[1]:.3g} x {box[2]:.3g} "
+                              "units); a garment wraps round the body, so it cannot be fitted")
+
+
+def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.ndarray) -> np.ndarray:
+    """(N,) bool: the vertices of the pieces that belong to ``category``."""
+    label = _components(len(points), tri)
+    used = np.zeros(len(points), dtype=bool)
+    used[np.unique(tri)] = True
+    keep = used.copy()
+    if category == "dress":
+        return keep
+    for c in np.unique(label[used]):
+        sel = (label == c) & used
+        y = float(np.median(points[sel, 1]))
+        if (category == "tshirt" and y < joints[_PELVIS, 1]) or (category == "trousers" and y > joints[_SPINE2, 1]):
+            keep[sel] = False
+    if not keep.any():
+        raise GarmentFitError(f"no piece of the mesh sits where a {category} is worn (every part was dropped)")
+    return keep
+
+
+def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: BodyModel,
+                mhclo: Mhclo | None = None, config: FitConfig = FitConfig()) -> FittedGarment:
+    """Fit a garment mesh to the T-posed body of ``betas`` (see the module's docstring).
+
+    Raises:
+        GarmentFitError: the mesh is empty, flat, or lies nowhere near the body.
+    """
+    began = time.perf_counter()
+    tri, owner = triangulate_polygons(src.face_counts, src.face_indices)
+    _check_shape(src, tri)
+    betas = np.asarray(betas, dtype=np.float64)
+    v_rest, joints = shape_body(body, betas)
+    height = float(v_rest[:, 1].max() - v_rest[:, 1].min())
+    hmap = load_hm08_map()
+    a_pose = hmap.pose if hmap is not None else _fallback_a_pose()
+    report: dict = {"source": src.source, "input_vertices": src.num_vertices}
+
+    why_not = mhclo_applies(mhclo, hmap, body, src.num_vertices) if mhclo is not None else "no .mhclo binding"
+    if why_not is None:
+        posed_points, weights = bind_mhclo(mhclo, hmap, body, betas)
+        pose = a_pose
+        report.update(method="mhclo", units_m=0.1, up_axis="Y", arm_pose=1.0)
+    else:
+        if mhclo is not None:
+            log.warning("%s: the .mhclo binding does not apply (%s); fitting by shape", src.source, why_not)
+        unit = src.meters_per_unit or _guess_unit(src.points, height)
+        ups = [src.up_axis] if src.up_axis else ["Y", "Z"]
+        best = None
+        for up in ups:
+            pts = src.points * unit @ (_Z_UP.T if up == "Z" else np.eye(3))
+            for frac in config.arm_poses:
+                pose = a_pose * frac
+                posed = _pose(body, v_rest, joints, pose)
+                shift, score = _align(pts, category, posed, joints, config.icp_iterations)
+                log.debug("up %s arm pose %.2f: mean distance %.1f mm", up, frac, score * 1e3)
+                if best is None or score < best[0]:
+                    best = (score, up, frac, pts + shift, pose, posed)
+        score, up, frac, posed_points, pose, posed = best
+        a = associate(posed_points, posed, body.faces)
+        weights = np.einsum("nk,nkj->nj", a.barycentric, body.weights[body.faces[a.triangle]])
+        weights = _smooth_weights(weights, tri, config.weight_smoothing)
+        median = float(np.median(a.distance))
+        if median > config.max_median_distance:
+            raise GarmentFitError(f"{src.source}: does not fit the body: after alignment its median vertex is "
+                                  f"{median:.2f} m from the body's surface (at most {config.max_median_distance} m); "
+                                  "is it a garment, and in the units its file says?")
+        report.update(method="shape", units_m=unit, up_axis=up, arm_pose=frac, align_mean_mm=round(score * 1e3, 1),
+                      **({"mhclo_skipped": why_not} if mhclo is not None else {}))
+    keep = _keep_pieces(posed_points, tri, category, joints)
+    rest = _unpose(posed_points, weights, joints, pose, body.parents)
+    # the pieces kept, renumbered; polygons with a dropped vertex go
+    new_index = np.cumsum(keep) - 1
+    starts = np.concatenate([[0], np.cumsum(src.face_counts)[:-1]])
+    poly_keep = np.logical_and.reduceat(keep[src.face_indices], starts) if len(starts) else np.zeros(0, bool)
+    corner_keep = np.repeat(poly_keep, src.face_counts)
+    counts = src.face_counts[poly_keep]
+    indices = new_index[src.face_indices[corner_keep]]
+    rest = rest[keep]
+    uv_indices = src.uv_indices[corner_keep] if src.uv_indices is not None else None
+    from .sew import push_out
+
+    rest = push_out(rest, np.asarray(v_rest), body.faces, clearance=config.clearance)
+    tri_kept, _ = triangulate_polygons(counts, indices)
+    if config.drape_frames > 0:
+        rest = drape(body, betas, rest, tri_kept, frames=config.drape_frames)
+    final = associate(rest, np.asarray(v_rest), body.faces)
+    report.update(vertices=int(len(rest)), polygons=int(len(counts)), triangles=int(len(tri_kept)),
+                  pieces_dropped=int(len(np.unique(_components(len(keep), tri)[~keep]))) if not keep.all() else 0,
+                  median_distance_mm=round(float(np.median(final.distance)) * 1e3, 1),
+                  inside_fraction=round(float(np.mean(_inside(rest, np.asarray(v_rest), body.faces, final))), 4),
+                  seconds=round(time.perf_counter() - began, 1))
+    return FittedGarment(points=rest, face_counts=counts, face_indices=indices, uv=src.uv, uv_indices=uv_indices,
+                         report=report)
+
+
+def _inside(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray, a) -> np.ndarray:
+    """(N,) bool: the point lies behind its closest body surface point (inside the body)."""
+    from ..core.features import vertex_normals
+
+    corners = body_faces[a.triangle]
+    closest = np.einsum("nk,nkc->nc", a.barycentric, body_vertices[corners])
+    normal = np.einsum("nk,nkc->nc", a.barycentric, vertex_normals(body_vertices, body_faces)[corners])
+    return np.einsum("nc,nc->n", points - closest, normal) < 0
+
+
+def _fallback_a_pose() -> np.ndarray:
+    """(72,) arms 45 degrees down, for a body without the shipped hm08 map."""
+    pose = np.zeros((24, 3))
+    pose[16, 2], pose[17, 2] = -np.pi / 4, np.pi / 4
+    return pose.ravel()
+
+
+def drape(body: BodyModel, betas: np.ndarray, points: np.ndarray, tri: np.ndarray, *, frames: int) -> np.ndarray:
+    """(N, 3) a garment hung ``frames`` frames under gravity on the T-posed body (Newton VBD,
+    the sewing material), its rest shape its current shape."""
+    from ..datagen.simulate import _import_engine, make_collider, resolve_device
+    from .sew import SewConfig, _simulate
+
+    try:
+        import warp
+
+        warp.config.quiet = True
+    except ImportError:
+        pass
+    newton, wp = _import_engine()
+    cfg = SewConfig().sim
+    v_rest, _ = shape_body(body, betas)
+    collider = make_collider(body, betas, cfg.collider_faces)
+    col_points = collider.pose(np.asarray(v_rest)[None], body.faces)[0]
+    return _simulate(newton, wp, resolve_device(cfg.device), points, tri, collider_points=col_points,
+                     collider_faces=collider.faces, frames=frames, gravity=cfg.gravity, cfg=cfg)
+
+
+def mhclo_beside(path: str | Path) -> Path | None:
+    """The ``.mhclo`` file next to a MakeHuman ``.obj`` (same stem), if any."""
+    candidate = Path(path).with_suffix(".mhclo")
+    return candidate if candidate.is_file() else None
