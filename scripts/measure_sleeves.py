@@ -5,7 +5,7 @@ as segments), against the same distance at rest.
     python scripts/measure_sleeves.py BAKED_SHOT.usda [--garment /Character/Tshirt] [--json OUT]
 
 A sleeve vertex is one that lies, at rest, beyond its shoulder joint along the arm
-(|x| > |x_shoulder| + 2 cm, the T-pose's arms are along +-X) and within 15 cm of its bone.
+(|x| > |x_shoulder| + 4 cm, the T-pose's arms are along +-X) and within 15 cm of its bone.
 If the sleeves follow the arms, the distances stay as they were at rest.
 """
 
@@ -60,7 +60,7 @@ def main(argv: list[str] | None = None) -> int:
     for side in ARMS:
         sign, s, e, w = side
         d_rest = arm_distance(rest[None], j[None], side)[0]
-        sleeve = (sign * rest[:, 0] > sign * j[s, 0] + 0.02) & (d_rest < 0.15)
+        sleeve = (sign * rest[:, 0] > sign * j[s, 0] + 0.04) & (d_rest < 0.15)
         if not sleeve.any():
             continue
         d = arm_distance(points[:, sleeve], posed_joints, side)

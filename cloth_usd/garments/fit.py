@@ -33,6 +33,7 @@ from scipy.spatial import cKDTree
 
 from ..core.association import associate
 from ..core.body import BodyModel, joint_transforms, lbs, shape_body
+from ..core.features import vertex_normals
 from ..core.rotations import axis_angle_to_matrix
 from .mhclo import Mhclo, bind_mhclo, load_hm08_map, mhclo_applies
 from .source import GarmentFitError, SourceMesh
@@ -129,6 +130,21 @@ def _guess_unit(points: np.ndarray, height: float) -> float:
     return UNIT_CANDIDATES[int(np.argmin(ratios))]
 
 
+def _units(src: SourceMesh, height: float) -> tuple[float, str]:
+    """Metres per unit and where that came from: the file, or (no units in the file, or
+    units that make the garment implausibly sized: USD's unauthored default of centimetres
+    on a file in metres) the size guess."""
+    guess = _guess_unit(src.points, height)
+    if src.meters_per_unit is None:
+        return guess, "size"
+    ratio = float(np.linalg.norm(_box(src.points))) * src.meters_per_unit / height
+    if 0.15 <= ratio <= 3.0:
+        return src.meters_per_unit, "file"
+    log.warning("%s: in the units its file says (%g m) the garment would be %.2f times the body's height; "
+                "using %g m per unit", src.source, src.meters_per_unit, ratio, guess)
+    return guess, "size"
+
+
 def _smooth_weights(weights: np.ndarray, tri: np.ndarray, passes: int) -> np.ndarray:
     if passes <= 0 or not len(tri):
         return weights
@@ -157,25 +173,41 @@ def _unpose(points: np.ndarray, weights: np.ndarray, joints: np.ndarray, pose: n
     return np.linalg.solve(blended[:, :, :3], (points - blended[:, :, 3])[..., None])[..., 0]
 
 
-def _align(points: np.ndarray, category: str, posed: np.ndarray, joints: np.ndarray,
+def _align(points: np.ndarray, category: str, posed: np.ndarray, faces: np.ndarray, joints: np.ndarray,
            iterations: int) -> tuple[np.ndarray, float]:
     """Translate a garment onto a posed body; ``(shift (3,) [m], score [m])``: the score is
-    the mean distance of the garment's vertices to the body's (clipped at 0.3 m)."""
+    the mean distance of the garment's vertices to the body's (clipped at 0.3 m), and the
+    shift the best-scoring one the iterations visited."""
     tree = cKDTree(posed)
     top = np.percentile(points[:, 1], 99)
     anchor = joints[_NECK, 1] + 0.02 if category != "trousers" else joints[_PELVIS, 1] + 0.12
-    shift = np.array([-np.median(points[:, 0]), anchor - top, 0.0])
+    centre_x = 0.5 * (np.percentile(points[:, 0], 1) + np.percentile(points[:, 0], 99))  # garments are symmetric
+    shift = np.array([-centre_x, anchor - top, 0.0])
     band = np.abs(posed[:, 1] - (np.median(points[:, 1]) + shift[1])) < 0.1
     shift[2] = (np.median(posed[band, 2]) if np.any(band) else 0.0) - np.median(points[:, 2])
+    normals = vertex_normals(posed, faces)
+
+    def score(at: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        d, i = tree.query(points + at)
+        return float(np.mean(np.minimum(d, 0.3))), d, i
+
+    best, d, i = score(shift)
+    best_shift = shift
     for _ in range(iterations):
-        d, i = tree.query(points + shift)
         keep = d <= np.percentile(d, 80)
-        step = (posed[i[keep]] - (points[keep] + shift)).mean(axis=0)
+        # point-to-plane: the translation that best brings each vertex onto its nearest
+        # body vertex's tangent plane (a garment may slide along the skin, not through it)
+        n = normals[i[keep]]
+        r = np.einsum("nc,nc->n", posed[i[keep]] - (points[keep] + shift), n)
+        a = n.T @ n
+        step = np.linalg.solve(a + 0.05 * np.trace(a) / 3 * np.eye(3), n.T @ r)  # weak directions stay put
         shift = shift + step
+        value, d, i = score(shift)
+        if value < best:
+            best, best_shift = value, shift
         if np.linalg.norm(step) < 1e-4:
             break
-    d, _ = tree.query(points + shift)
-    return shift, float(np.mean(np.minimum(d, 0.3)))
+    return best_shift, best
 
 
 def _check_shape(src: SourceMesh, tri: np.ndarray) -> None:
@@ -233,7 +265,7 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
     else:
         if mhclo is not None:
             log.warning("%s: the .mhclo binding does not apply (%s); fitting by shape", src.source, why_not)
-        unit = src.meters_per_unit or _guess_unit(src.points, height)
+        unit, units_from = _units(src, height)
         ups = [src.up_axis] if src.up_axis else ["Y", "Z"]
         best = None
         for up in ups:
@@ -241,7 +273,7 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
             for frac in config.arm_poses:
                 pose = a_pose * frac
                 posed = _pose(body, v_rest, joints, pose)
-                shift, score = _align(pts, category, posed, joints, config.icp_iterations)
+                shift, score = _align(pts, category, posed, body.faces, joints, config.icp_iterations)
                 log.debug("up %s arm pose %.2f: mean distance %.1f mm", up, frac, score * 1e3)
                 if best is None or score < best[0]:
                     best = (score, up, frac, pts + shift, pose, posed)
@@ -254,7 +286,7 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
             raise GarmentFitError(f"{src.source}: does not fit the body: after alignment its median vertex is "
                                   f"{median:.2f} m from the body's surface (at most {config.max_median_distance} m); "
                                   "is it a garment, and in the units its file says?")
-        report.update(method="shape", units_m=unit, up_axis=up, arm_pose=frac, align_mean_mm=round(score * 1e3, 1),
+        report.update(method="shape", units_m=unit, units_from=units_from, up_axis=up, arm_pose=frac, align_mean_mm=round(score * 1e3, 1),
                       **({"mhclo_skipped": why_not} if mhclo is not None else {}))
     keep = _keep_pieces(posed_points, tri, category, joints)
     rest = _unpose(posed_points, weights, joints, pose, body.parents)

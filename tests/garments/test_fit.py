@@ -1,0 +1,252 @@
+"""``cloth-usd garment fit``: readers, the MakeHuman binding, the fit by shape (units, up
+axis, arm pose, unposing) and the one-line refusals. Only the last test drapes (Newton, a
+few hundred vertices, 2 frames)."""
+
+from __future__ import annotations
+
+import importlib.util
+
+import numpy as np
+import pytest
+
+from cloth_usd.cli import main
+from cloth_usd.core.body import lbs, load_body_model, shape_body
+from cloth_usd.garments.fit import FitConfig, fit_garment, triangulate_polygons
+from cloth_usd.garments.mhclo import Mhclo, bind_mhclo, load_hm08_map, read_mhclo
+from cloth_usd.garments.source import GarmentFitError, SourceMesh, read_glb, read_obj
+
+NEWTON = importlib.util.find_spec("newton") is not None
+
+
+@pytest.fixture(scope="module")
+def body():
+    return load_body_model()
+
+
+@pytest.fixture(scope="module")
+def hmap():
+    m = load_hm08_map()
+    assert m is not None, "models/garments/hm08_map.npz is shipped with the package"
+    return m
+
+
+def _region_mesh(body, joints_wanted, lift=0.01, pose=None):
+    """A garment-like patch of the body: its faces whose corners are all mostly skinned to
+    ``joints_wanted``, lifted ``lift`` along the normals, posed by ``pose``. Returns
+    (rest points (N, 3) lifted in the T-pose, posed points (N, 3), triangles (M, 3))."""
+    from cloth_usd.core.features import vertex_normals
+
+    v, j = shape_body(body, np.zeros(10))
+    dominant = np.argmax(body.weights, axis=1)
+    inside = np.isin(dominant, joints_wanted)
+    faces = body.faces[np.all(inside[body.faces], axis=1)]
+    used, faces = np.unique(faces, return_inverse=True)
+    faces = faces.reshape(-1, 3)
+    rest = v[used] + lift * vertex_normals(v, body.faces)[used]
+    if pose is None:
+        return rest, rest, faces
+    skinned = lbs(body, v + lift * vertex_normals(v, body.faces), j, pose[None])[0][0][used]
+    return rest, skinned, faces
+
+
+# --------------------------------------------------------------------------- readers
+
+
+def test_read_obj_keeps_order_polygons_and_uvs(tmp_path):
+    path = tmp_path / "g.obj"
+    path.write_text("# a quad and a triangle\nv 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 2 0 0\n"
+                    "vt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\ng shirt\nf 1/1 2/2 3/3 4/4\nf -4/2 -1/1 -3/3\n")
+    m = read_obj(path)
+    assert m.points.shape == (5, 3) and m.meters_per_unit is None and m.up_axis is None
+    np.testing.assert_array_equal(m.face_counts, [4, 3])
+    np.testing.assert_array_equal(m.face_indices, [0, 1, 2, 3, 1, 4, 2])
+    np.testing.assert_array_equal(m.uv_indices, [0, 1, 2, 3, 1, 0, 2])
+
+
+def test_read_obj_bad_index_is_one_line(tmp_path):
+    path = tmp_path / "bad.obj"
+    path.write_text("v 0 0 0\nf 1 2 3\n")
+    with pytest.raises(GarmentFitError, match="indexes a vertex"):
+        read_obj(path)
+
+
+def test_triangulate_polygons_fans():
+    tri, owner = triangulate_polygons(np.array([4, 3, 5]), np.arange(12))
+    assert len(tri) == 2 + 1 + 3
+    np.testing.assert_array_equal(np.sort(owner), [0, 0, 1, 2, 2, 2])
+    assert {tuple(t) for t in tri[owner == 0]} == {(0, 1, 2), (0, 2, 3)}
+
+
+def test_read_glb_is_metres_y_up(tmp_path):
+    trimesh = pytest.importorskip("trimesh")
+    pts = np.array([[0, 0, 0], [0.5, 0, 0], [0, 0.5, 0.1]], dtype=np.float64)
+    trimesh.Trimesh(pts, [[0, 1, 2]], process=False).export(tmp_path / "g.glb")
+    m = read_glb(tmp_path / "g.glb")
+    assert m.meters_per_unit == 1.0 and m.up_axis == "Y"
+    np.testing.assert_allclose(m.points, pts, atol=1e-6)
+
+
+def test_read_usd_mesh_world_space_and_metadata(tmp_path):
+    from pxr import Gf, Usd, UsdGeom, Vt
+
+    from cloth_usd.usd.mesh_read import read_usd_mesh
+
+    path = tmp_path / "g.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, "Z")
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
+    xf = UsdGeom.Xform.Define(stage, "/Root")
+    xf.AddTranslateOp().Set(Gf.Vec3d(10, 0, 0))
+    mesh = UsdGeom.Mesh.Define(stage, "/Root/Shirt")
+    mesh.GetPointsAttr().Set(Vt.Vec3fArray([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0)]))
+    mesh.GetFaceVertexCountsAttr().Set([4])
+    mesh.GetFaceVertexIndicesAttr().Set([0, 1, 2, 3])
+    stage.GetRootLayer().Save()
+    m = read_usd_mesh(path)
+    assert m.up_axis == "Z" and m.meters_per_unit == pytest.approx(0.01)
+    np.testing.assert_allclose(m.points[:, 0], [10, 11, 11, 10])
+    assert m.uv is None
+
+
+# --------------------------------------------------------------------------- MakeHuman binding
+
+
+def test_read_mhclo(tmp_path):
+    path = tmp_path / "g.mhclo"
+    path.write_text("# comment\nbasemesh hm08\nx_scale 1 2 1.5\ny_scale 3 4 2.0\nz_scale 5 6 0.5\n"
+                    "verts 0\n10 11 12 0.2 0.3 0.5 0.01 0.02 0.03\n7\ndelete_verts\n1 2 3\n")
+    m = read_mhclo(path)
+    np.testing.assert_array_equal(m.refs, [[10, 11, 12], [7, 7, 7]])
+    np.testing.assert_allclose(m.weights, [[0.2, 0.3, 0.5], [1, 0, 0]])
+    np.testing.assert_allclose(m.offsets[0], [0.01, 0.02, 0.03])
+    assert m.scales[1] == (3, 4, 2.0) and m.basemesh == "hm08"
+
+
+def test_hm08_map_is_close_to_the_body(hmap):
+    # hm08's skin against our body fitted to it (scripts/build_hm08_map.py): measured 6.3 mm p50
+    assert hmap.distance_mm["p50"] < 10.0 and hmap.distance_mm["p95"] < 35.0
+    assert np.all(np.abs(hmap.lift[hmap.hm_index < 13380]) < 0.06)
+
+
+def test_binding_puts_a_forearm_sleeve_along_the_t_posed_forearm(body, hmap):
+    """Garment vertices bound to hm08 vertices on the left forearm (MakeHuman's A-pose: the
+    forearm points down and forward) land, once unposed, beside our T-posed forearm (+X)."""
+    from cloth_usd.garments.fit import _unpose
+
+    corner_w = body.weights[body.faces[hmap.triangle]].mean(axis=1)
+    forearm = np.flatnonzero((np.argmax(corner_w, axis=1) == 18) & (hmap.hm_index < 13380))[:200]
+    refs = np.repeat(hmap.hm_index[forearm][:, None], 3, axis=1)
+    scales = tuple((int(hmap.hm_index[0]), int(hmap.hm_index[1]), 1.0) for _ in range(3))
+    mh = Mhclo(refs=refs, weights=np.tile([1.0, 0.0, 0.0], (len(refs), 1)), offsets=np.zeros((len(refs), 3)),
+               scales=scales, basemesh="hm08")
+    posed, weights = bind_mhclo(mh, hmap, body, np.zeros(10))
+    v, j = shape_body(body, np.zeros(10))
+    assert np.median(posed[:, 1]) < j[18, 1] - 0.1  # A-pose: below the T-posed elbow
+    rest = _unpose(posed, weights, j, hmap.pose, body.parents)
+    assert np.all(rest[:, 0] > j[18, 0] - 0.02) and np.all(rest[:, 0] < j[20, 0] + 0.02)
+    assert np.all(np.linalg.norm(rest[:, 1:] - j[18, 1:], axis=1) < 0.08)  # within a forearm's radius
+
+
+# --------------------------------------------------------------------------- fit by shape
+
+
+@pytest.mark.parametrize("up", ["Y", "Z"])
+def test_fit_by_shape_recovers_units_axis_pose(body, hmap, up):
+    """The body's own torso and arms, 1 cm out, posed into MakeHuman's A-pose, given in
+    centimetres (Y or Z up) and shifted: the fit finds the units, the axis and the pose and
+    unposes it back to where it was made, within 1 cm (median) and 3 cm (p95)."""
+    rest, posed, faces = _region_mesh(body, [3, 6, 9, 13, 14, 16, 17, 18, 19], pose=hmap.pose)
+    pts = (posed + [0.05, 0.3, -0.02]) * 100.0
+    if up == "Z":
+        pts = pts @ np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]).T  # (x, y, z) -> (x, -z, y)
+    src = SourceMesh(points=pts, face_counts=np.full(len(faces), 3), face_indices=faces.ravel(), uv=None,
+                     uv_indices=None, meters_per_unit=None, up_axis=None, source="synthetic")
+    fitted = fit_garment(src, "tshirt", np.zeros(10), body=body, config=FitConfig(drape_frames=0))
+    r = fitted.report
+    assert (r["method"], r["units_m"], r["up_axis"], r["arm_pose"]) == ("shape", 0.01, up, 1.0)
+    err = np.linalg.norm(fitted.points - rest, axis=1)
+    assert np.median(err) < 0.01 and np.percentile(err, 95) < 0.03, (np.median(err), np.percentile(err, 95))
+    assert r["inside_fraction"] < 0.01
+
+
+def test_fit_keeps_a_t_posed_garment_t_posed(body):
+    rest, _, faces = _region_mesh(body, [3, 6, 9, 16, 17, 18, 19])
+    src = SourceMesh(points=rest, face_counts=np.full(len(faces), 3), face_indices=faces.ravel(), uv=None,
+                     uv_indices=None, meters_per_unit=1.0, up_axis="Y", source="synthetic")
+    fitted = fit_garment(src, "tshirt", np.zeros(10), body=body, config=FitConfig(drape_frames=0))
+    assert fitted.report["arm_pose"] == 0.0
+    assert np.median(np.linalg.norm(fitted.points - rest, axis=1)) < 0.01
+
+
+def test_tshirt_drops_the_trousers_piece(body):
+    top, _, top_f = _region_mesh(body, [3, 6, 9, 16, 17])
+    legs, _, leg_f = _region_mesh(body, [4, 5])
+    pts = np.concatenate([top, legs])
+    faces = np.concatenate([top_f, leg_f + len(top)])
+    src = SourceMesh(points=pts, face_counts=np.full(len(faces), 3), face_indices=faces.ravel(), uv=None,
+                     uv_indices=None, meters_per_unit=1.0, up_axis="Y", source="synthetic")
+    fitted = fit_garment(src, "tshirt", np.zeros(10), body=body, config=FitConfig(drape_frames=0))
+    assert len(fitted.points) == len(top) and fitted.report["pieces_dropped"] == 2  # one per leg
+
+
+def test_flat_and_empty_meshes_are_refused(body):
+    plane = SourceMesh(points=np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]]),
+                       face_counts=np.array([4]), face_indices=np.arange(4), uv=None, uv_indices=None,
+                       meters_per_unit=1.0, up_axis="Y", source="plane.obj")
+    with pytest.raises(GarmentFitError, match="flat"):
+        fit_garment(plane, "tshirt", np.zeros(10), body=body, config=FitConfig(drape_frames=0))
+    empty = SourceMesh(points=np.zeros((0, 3)), face_counts=np.zeros(0, dtype=np.int64),
+                       face_indices=np.zeros(0, dtype=np.int64), uv=None, uv_indices=None, meters_per_unit=None,
+                       up_axis=None, source="empty.obj")
+    with pytest.raises(GarmentFitError, match="no polygons"):
+        fit_garment(empty, "tshirt", np.zeros(10), body=body, config=FitConfig(drape_frames=0))
+
+
+def test_a_mesh_far_from_any_body_shape_is_refused(body):
+    """A closed box the size of a torso fits no body: its vertices stay far from the skin."""
+    corners = np.array([[x, y, z] for x in (-1, 1) for y in (-1, 1) for z in (-1, 1)], dtype=float) * [0.6, 0.2, 0.5]
+    quads = np.array([[0, 1, 3, 2], [4, 6, 7, 5], [0, 4, 5, 1], [2, 3, 7, 6], [0, 2, 6, 4], [1, 5, 7, 3]])
+    src = SourceMesh(points=corners, face_counts=np.full(6, 4), face_indices=quads.ravel(), uv=None, uv_indices=None,
+                     meters_per_unit=1.0, up_axis="Y", source="box.obj")
+    with pytest.raises(GarmentFitError, match="does not fit the body"):
+        fit_garment(src, "tshirt", np.zeros(10), body=body, config=FitConfig(drape_frames=0))
+
+
+# --------------------------------------------------------------------------- the command
+
+
+@pytest.mark.parametrize("text,message", [("", "no polygons"),
+                                          ("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nf 1 2 3 4\n", "flat")])
+def test_cli_refuses_in_one_line(tmp_path, capsys, text, message):
+    path = tmp_path / "in.obj"
+    path.write_text(text)
+    code = main(["garment", "fit", str(path), "-o", str(tmp_path / "out.usda"), "--category", "tshirt"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1 and message in err
+    assert not (tmp_path / "out.usda").exists()
+
+
+@pytest.mark.skipif(not NEWTON, reason="newton is not installed")
+def test_cli_fits_and_drapes_a_small_obj(tmp_path, body):
+    from pxr import Usd, UsdGeom
+
+    rest, _, faces = _region_mesh(body, [16, 17])  # the upper arms' skin: two short sleeves
+    keep = np.arange(len(rest))
+    assert 100 < len(keep) < 800
+    lines = [f"v {x * 10:.5f} {y * 10:.5f} {z * 10:.5f}" for x, y, z in rest]  # decimetres
+    lines += [f"vt {u:.4f} {v:.4f}" for u, v in rest[:, :2]]
+    lines += [f"f {a + 1}/{a + 1} {b + 1}/{b + 1} {c + 1}/{c + 1}" for a, b, c in faces]
+    (tmp_path / "sleeves.obj").write_text("\n".join(lines) + "\n")
+    out = tmp_path / "sleeves.usda"
+    code = main(["garment", "fit", str(tmp_path / "sleeves.obj"), "-o", str(out), "--category", "tshirt",
+                 "--drape-frames", "2"])
+    assert code == 0
+    stage = Usd.Stage.Open(str(out))
+    mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Character/Tshirt"))
+    pts = np.asarray(mesh.GetPointsAttr().Get())
+    assert pts.shape == rest.shape
+    assert mesh.GetPrim().GetAttribute("cloth:category").Get() == "tshirt"
+    assert UsdGeom.PrimvarsAPI(mesh).GetPrimvar("st").HasValue()
+    assert stage.GetPrimAtPath("/Character/Skeleton").IsValid()
+    # 2 frames of drape move it little: the sleeves stay on the arms
+    assert np.median(np.linalg.norm(pts - rest, axis=1)) < 0.02
