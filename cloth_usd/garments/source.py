@@ -109,9 +109,27 @@ def read_glb(path: str | Path) -> SourceMesh:
     pts = np.concatenate(points) if points else np.zeros((0, 3))
     tri = np.concatenate(faces) if faces else np.zeros((0, 3), dtype=np.int64)
     has_uv = bool(uvs) and all(u is not None for u in uvs)
-    return SourceMesh(points=pts, face_counts=np.full(len(tri), 3, dtype=np.int64), face_indices=tri.ravel(),
-                      uv=np.concatenate(uvs) if has_uv else None, uv_indices=tri.ravel() if has_uv else None,
-                      meters_per_unit=1.0, up_axis="Y", source=str(path))
+    # glTF splits a vertex wherever its UV (or normal) changes; the cloth must not tear there,
+    # so vertices at one position become one (their UVs stay per corner)
+    welded, index = _weld(pts)
+    return SourceMesh(points=welded, face_counts=np.full(len(tri), 3, dtype=np.int64),
+                      face_indices=index[tri.ravel()], uv=np.concatenate(uvs) if has_uv else None,
+                      uv_indices=tri.ravel() if has_uv else None, meters_per_unit=1.0, up_axis="Y",
+                      source=str(path))
+
+
+def _weld(points: np.ndarray, tolerance: float = 1e-6) -> tuple[np.ndarray, np.ndarray]:
+    """``(unique points (N', 3), (N,) index of each point in them)``: points closer than
+    ``tolerance`` times the mesh's size merged, in order of first appearance."""
+    if not len(points):
+        return points, np.zeros(0, dtype=np.int64)
+    size = float(np.ptp(points, axis=0).max()) or 1.0
+    keys = np.round(points / (tolerance * size)).astype(np.int64)
+    _, first, inverse = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    order = np.argsort(first)  # number the merged points in order of first appearance
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return points[first[order]], rank[inverse.ravel()]
 
 
 def read_garment_mesh(path: str | Path) -> SourceMesh:

@@ -250,3 +250,19 @@ def test_cli_fits_and_drapes_a_small_obj(tmp_path, body):
     assert stage.GetPrimAtPath("/Character/Skeleton").IsValid()
     # 2 frames of drape move it little: the sleeves stay on the arms
     assert np.median(np.linalg.norm(pts - rest, axis=1)) < 0.02
+
+
+def test_read_glb_welds_vertices_split_at_uv_seams(tmp_path):
+    trimesh = pytest.importorskip("trimesh")
+    from trimesh.visual import TextureVisuals
+
+    # two triangles sharing an edge, the shared vertices duplicated (as glTF does at a UV seam)
+    pts = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0.2]], dtype=np.float64)
+    uv = np.array([[0, 0], [0.5, 0], [0, 0.5], [0.6, 0], [0.6, 0.5], [1, 1]], dtype=np.float64)
+    mesh = trimesh.Trimesh(pts, [[0, 1, 2], [3, 5, 4]], visual=TextureVisuals(uv=uv), process=False)
+    mesh.export(tmp_path / "seam.glb")
+    m = read_glb(tmp_path / "seam.glb")
+    assert m.num_vertices == 4
+    tri, _ = triangulate_polygons(m.face_counts, m.face_indices)
+    assert len(set(tri[0]) & set(tri[1])) == 2  # the two triangles share an edge again
+    np.testing.assert_allclose(m.uv[m.uv_indices[3:]], uv[[3, 5, 4]], atol=1e-6)  # UVs per corner kept
