@@ -127,6 +127,11 @@ class PosedBody:
     """(T, N, 3) float64 each garment vertex's associated posed body vertex [m] (``I M_b``)."""
     garment_normals: np.ndarray
     """(T, N, 3) float64 the body normals there."""
+    patch_points: np.ndarray | None = None
+    """(T, V', 3) float64 every posed vertex of the pair's body patch [m] (the associated
+    ones and their one-ring, :attr:`BodyPatch.vertices`)."""
+    patch_normals: np.ndarray | None = None
+    """(T, V', 3) float64 their normals (exact at the associated vertices only)."""
 
 
 def prepare_pair(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray, faces: np.ndarray,
@@ -163,7 +168,8 @@ def pose_body(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
     patch = pair.patch
     verts, joints = lbs(body, pair.v_shaped, pair.joints, poses, transl, vertices=patch.vertices)
     normals = vertex_normals(verts, patch.faces)
-    return PosedBody(joints=joints, garment_points=verts[:, patch.assoc], garment_normals=normals[:, patch.assoc])
+    return PosedBody(joints=joints, garment_points=verts[:, patch.assoc], garment_normals=normals[:, patch.assoc],
+                     patch_points=verts, patch_normals=normals)
 
 
 def coarse_model_features(pair: GarmentPair, posed: PosedBody, transl: np.ndarray) -> np.ndarray:

@@ -3,9 +3,12 @@
 The objective is the garment's energy (:mod:`cloth_usd.nn.physics`) at the model's
 output, quasi-static: membrane strain against the rest garment, bending against its
 rest angles, gravity, and a one-sided contact penalty against the posed body (each
-garment vertex against the tangent plane of its associated body vertex, the point and
-normal the features and the post-process use). Minimising it per frame asks for the
-garment at rest in that pose, which is what a per-frame model can learn (SNUG, PBNS).
+garment vertex against the tangent plane of the body vertex nearest to it, found again for
+every garment the objective sees, among the associated body vertices: HOOD's and SNUG's
+choice; :class:`ContactPoints` ``associated``, tshirt-v4's, keeps each vertex's own
+associated body vertex, which pushes back a vertex that slides along the body). Minimising
+it per frame asks for the garment at rest in that pose, which is what a per-frame model can
+learn (SNUG, PBNS).
 
 The poses, bodies and garments are a data set config's (:class:`~cloth_usd.datagen.factory.
 FactoryConfig`, the file ``cloth-usd datagen`` reads): the same garment-body pairs, motions
@@ -53,6 +56,7 @@ included; the warm-up is never ``t``). Validation reports the energy as for phys
 from __future__ import annotations
 
 import dataclasses
+import enum
 import json
 import logging
 import math
@@ -77,7 +81,7 @@ from .train import (CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, 
                     _coarse_forward, _detail_forward, _record_epoch, _start_epoch, _step, _Tensors, build_model,
                     plot_history)
 
-__all__ = ["PhysicsClip", "PhysicsSet", "PhysicsOptions", "physics_set", "load_physics_config", "window_batches",
+__all__ = ["PhysicsClip", "PhysicsSet", "PhysicsOptions", "ContactPoints", "physics_set", "load_physics_config", "window_batches",
            "train_physics", "PHYSICS_FIT", "VAL_TERMS", "OUTPUT_SCALE", "TERMS"]
 
 log = logging.getLogger(__name__)
@@ -102,6 +106,21 @@ TERMS = ("membrane", "bending", "gravity", "contact", "inertia", "friction")
 WINDOW = (-2, -1, 0)
 
 
+class ContactPoints(str, enum.Enum):
+    """The body point a garment vertex's contact term is measured against."""
+
+    NEAREST = "nearest"
+    """The associated body vertex nearest to where the vertex is now (found again for every
+    garment the objective sees, as HOOD and SNUG do). The default: measured on the Newton test
+    set, Newton's own garment is then near a minimum (4-10 J a frame against skinning's
+    2500-3000), where with ``associated`` it scored 15,000-73,000 J, ten to thirty times
+    worse than skinning (README, ``bench/bench_energy_minimum.py``)."""
+    ASSOCIATED = "associated"
+    """The vertex's own associated body vertex, fixed from the rest pose (tshirt-v4's
+    objective): a vertex that slides along the body is measured against the plane of a body
+    point it has left, and pushed back."""
+
+
 @dataclass(frozen=True)
 class PhysicsOptions:
     """The physics objective's own settings: the ``"physics"`` table of a physics run's
@@ -121,8 +140,16 @@ class PhysicsOptions:
     ``x_t``'s contact force)."""
     friction_epsilon: float = 1.0e-2
     """Slip speed [m/s] below which friction is smoothed (Newton's ``friction_epsilon``)."""
+    contact: ContactPoints = ContactPoints.NEAREST
+    """Which body point each garment vertex's contact is measured against
+    (:class:`ContactPoints`)."""
 
     def __post_init__(self) -> None:
+        try:
+            object.__setattr__(self, "contact", ContactPoints(self.contact))
+        except ValueError:
+            raise ArgumentError(f"PhysicsOptions.contact must be one of {', '.join(c.value for c in ContactPoints)}, "
+                                f"got {self.contact!r}") from None
         for name in ("dynamic", "detach_history", "friction"):
             if not isinstance(getattr(self, name), bool):
                 raise ArgumentError(f"PhysicsOptions.{name} must be true or false, got {getattr(self, name)!r}")
@@ -137,7 +164,7 @@ class PhysicsOptions:
         return WINDOW if self.dynamic else (0,)
 
     def to_json(self) -> dict:
-        return dataclasses.asdict(self)
+        return {**dataclasses.asdict(self), "contact": self.contact.value}
 
     @classmethod
     def from_mapping(cls, raw, source: str = "physics") -> PhysicsOptions:
@@ -385,6 +412,11 @@ class _Inputs:
     """(B, N, 3) float64 [m] each garment vertex's associated posed body vertex."""
     body_normals: np.ndarray
     """(B, N, 3) float64 the body normals there."""
+    cloud_points: np.ndarray
+    """(B, C, 3) float64 the posed associated body vertices [m], each once: the candidates
+    of :attr:`ContactPoints.NEAREST`."""
+    cloud_normals: np.ndarray
+    """(B, C, 3) float64 their normals."""
 
 
 class _Tier:
@@ -398,12 +430,15 @@ class _Tier:
         posed = pose_body(self.body, clip.pair, poses, transl)
         feats = coarse_model_features(clip.pair, posed, transl)
         base = coarse_base_points(self.body, clip.pair, posed, poses, transl, self.base)
+        cloud = np.unique(clip.pair.patch.assoc)
+        contact = (posed.garment_points, posed.garment_normals, posed.patch_points[:, cloud],
+                   posed.patch_normals[:, cloud])
         if self.tier is Tier.COARSE:
-            return _Inputs(feats, None, base, posed.garment_points, posed.garment_normals)
+            return _Inputs(feats, None, base, *contact)
         with torch.no_grad():  # the coarse model's M_coarse, as the runtime makes it (before the post-process)
             m_coarse = base + _coarse_forward(self.coarse_model, feats, clip.pair.graph, self.tensors).cpu().numpy()
         feats, attrs = detail_model_inputs(clip.pair, m_coarse, posed, poses, transl)
-        return _Inputs(feats, attrs, m_coarse, posed.garment_points, posed.garment_normals)
+        return _Inputs(feats, attrs, m_coarse, *contact)
 
     def forward(self, model, clip: PhysicsClip, inp: _Inputs) -> torch.Tensor:
         """(B, N, 3) float64 the model's garment [m]."""
@@ -414,10 +449,11 @@ class _Tier:
         return torch.from_numpy(inp.base).to(delta.device) + delta.double()
 
 
-def _energy(clip: PhysicsClip, x: torch.Tensor, inp: _Inputs, material: Material) -> torch.Tensor:
-    """(B,) the quasi-static energy [J] of garments ``x`` (B, N, 3)."""
-    return garment_energy(x, clip.rest, material, body_points=torch.from_numpy(inp.body_points).to(x),
-                          body_normals=torch.from_numpy(inp.body_normals).to(x)).total
+def _energy(clip: PhysicsClip, x: torch.Tensor, inp: _Inputs, material: Material,
+            contact: ContactPoints = ContactPoints.NEAREST) -> torch.Tensor:
+    """(B,) the quasi-static energy [J] of garments ``x`` (B, N, 3), each at its own frame of ``inp``."""
+    return _terms(clip, x, _Window(inp, np.arange(x.shape[0])[None]), material,
+                  PhysicsOptions(contact=contact))["total"]
 
 
 def _statistics(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainConfig) -> None:
@@ -494,10 +530,18 @@ def _terms(clip: PhysicsClip, x: torch.Tensor, win: _Window, material: Material,
         x: (U, N, 3) float64 garments [m] at the window's distinct frames.
     """
     index = torch.from_numpy(win.index).to(x.device)
-    points = torch.from_numpy(win.inputs.body_points).to(x)
-    normals = torch.from_numpy(win.inputs.body_normals).to(x)
     now = index[-1]
-    x_t, p_t, n_t = x[now], points[now], normals[now]
+    x_t = x[now]
+    if options.contact is ContactPoints.NEAREST:
+        nearest = _nearest(win.inputs.cloud_points[win.index[-1]], x_t.detach().cpu().numpy())
+        rows = torch.arange(len(nearest), device=x.device)[:, None]
+        nearest = torch.from_numpy(nearest).to(x.device)
+        points = torch.from_numpy(win.inputs.cloud_points).to(x)[index][:, rows, nearest]
+        normals = torch.from_numpy(win.inputs.cloud_normals).to(x)[index][:, rows, nearest]
+    else:
+        points = torch.from_numpy(win.inputs.body_points).to(x)[index]
+        normals = torch.from_numpy(win.inputs.body_normals).to(x)[index]
+    p_t, n_t = points[-1], normals[-1]
     previous = None
     if options.dynamic:
         previous = (x[index[1]], x[index[0]])
@@ -509,10 +553,21 @@ def _terms(clip: PhysicsClip, x: torch.Tensor, win: _Window, material: Material,
     terms["friction"] = x_t.new_zeros(x_t.shape[0])
     if options.friction:
         force = contact_normal_force(x_t, p_t, n_t, material)  # lagged: a constant of this step
-        terms["friction"] = friction_energy(x_t, previous[0], p_t, points[index[1]], n_t, force, material,
+        terms["friction"] = friction_energy(x_t, previous[0], p_t, points[1], n_t, force, material,
                                             dt=clip.dt, epsilon=options.friction_epsilon)
     terms["total"] = sum(terms[name] for name in TERMS)
     return terms
+
+
+def _nearest(cloud: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """(B, N) int64 the index of each garment vertex's nearest cloud point, per frame.
+
+    Args:
+        cloud: (B, C, 3) body points [m]; x: (B, N, 3) garment points [m].
+    """
+    from scipy.spatial import cKDTree
+
+    return np.stack([cKDTree(c).query(g)[1] for c, g in zip(cloud, x)]).astype(np.int64)
 
 
 def _supervised(clip: PhysicsClip, x_t: torch.Tensor, t: np.ndarray, weight: float) -> torch.Tensor | None:

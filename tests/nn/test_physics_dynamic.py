@@ -123,7 +123,7 @@ def _triangle_case():
     body = np.broadcast_to(rest_points + [0.0, -0.025, 0.0], (3, 3, 3)).copy()
     normals = np.broadcast_to([0.0, 1.0, 0.0], (3, 3, 3)).copy()
     inputs = _Inputs(features=np.zeros((3, 3, 7)), attributes=None, base=x.numpy().copy(), body_points=body,
-                     body_normals=normals)
+                     body_normals=normals, cloud_points=body, cloud_normals=normals)  # each vertex's nearest: its own
     return clip, material, rest, x, inputs
 
 
@@ -166,18 +166,21 @@ def rest_mass(clip):
 
 def test_friction_resists_sliding_along_the_body_and_not_across_it():
     clip, material, _, x, inputs = _triangle_case()
-    inputs = _Inputs(inputs.features, None, inputs.base, inputs.base - [0.0, 1e-3, 0.0], inputs.body_normals)
+    inputs = _Inputs(inputs.features, None, inputs.base, inputs.base - [0.0, 1e-3, 0.0], inputs.body_normals,
+                     inputs.base - [0.0, 1e-3, 0.0], inputs.body_normals)
     win = _Window(inputs, np.array([[0], [1], [2]]))
     options = PhysicsOptions(dynamic=True, friction=True)
     assert float(_terms(clip, x, win, material, options)["friction"]) == 0.0  # the body moved with it
     slid = inputs.body_points.copy()
     slid[2] += [0.01, 0.0, 0.0]  # the body slides 1 cm under the garment in the step t-1 -> t
-    e = _terms(clip, x, _Window(_Inputs(inputs.features, None, inputs.base, slid, inputs.body_normals),
+    e = _terms(clip, x, _Window(_Inputs(inputs.features, None, inputs.base, slid, inputs.body_normals, slid,
+                                        inputs.body_normals),
                                 win.index), material, options)
     assert float(e["friction"]) > 0.0
     across = inputs.body_points.copy()
     across[2] += [0.0, 0.005, 0.0]  # along the normal: no friction
-    e = _terms(clip, x, _Window(_Inputs(inputs.features, None, inputs.base, across, inputs.body_normals),
+    e = _terms(clip, x, _Window(_Inputs(inputs.features, None, inputs.base, across, inputs.body_normals, across,
+                                        inputs.body_normals),
                                 win.index), material, options)
     assert float(e["friction"]) == 0.0
 

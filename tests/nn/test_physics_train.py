@@ -133,3 +133,34 @@ def test_a_fresh_model_starts_alive_near_its_base(planned, seed):
     with torch.no_grad():
         moved = torch.linalg.vector_norm(step.forward(model, clip, inp) - torch.from_numpy(inp.base), dim=-1)
     assert float(moved.min()) > 1e-4 and float(moved.max()) < 5e-3  # 0.1 to 5 mm
+
+
+def test_nearest_contact_measures_a_sliding_vertex_against_the_body_under_it(planned):
+    """A garment vertex moved along the body, 4 mm off it, is outside the body: the nearest
+    contact puts it against the body point under it (almost no contact energy); the associated
+    contact still measures it against the body point it left."""
+    from cloth_usd.nn.physics_train import ContactPoints, PhysicsOptions, _nearest
+
+    cloud = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
+    np.testing.assert_array_equal(_nearest(cloud, np.array([[[0.9, 0.1, 0.0], [0.1, 0.2, 0.0]]])), [[1, 0]])
+    assert PhysicsOptions().contact is ContactPoints.NEAREST
+    assert PhysicsOptions(contact="associated").to_json()["contact"] == "associated"
+    with pytest.raises(ArgumentError, match="contact must be one of nearest, associated"):
+        PhysicsOptions(contact="closest")
+
+    clip = planned.split(Split.TRAIN)[0]
+    step = _Tier(Tier.COARSE, _body(), CoarseBase.SKINNED, _Tensors(torch.device("cpu")))
+    inp = step.inputs(clip, np.array([0]))
+    body, normals = inp.cloud_points[0], inp.cloud_normals[0]
+    garment = inp.base.copy()
+    # every garment vertex placed 8 mm outside one body vertex far (> 5 cm) from its associated one
+    far = np.linalg.norm(body[:, None] - inp.body_points[0][None], axis=-1) > 0.05
+    pick = np.argmax(far, axis=0)
+    garment[0] = body[pick] + 0.008 * normals[pick]
+    x = torch.from_numpy(garment)
+    near = float(_energy(clip, x, inp, planned.material))
+    assoc = float(_energy(clip, x, inp, planned.material, contact=ContactPoints.ASSOCIATED))
+    from cloth_usd.nn.physics import garment_energy
+
+    free = float(garment_energy(x, clip.rest, planned.material).total)  # no contact term at all
+    assert near == pytest.approx(free, rel=1e-3) and assoc > free + 1.0, (near, assoc, free)
