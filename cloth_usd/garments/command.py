@@ -106,7 +106,9 @@ def _fit(args: argparse.Namespace) -> int:
     if args.drape_frames < 0:
         raise ArgumentError(f"--drape-frames {args.drape_frames}: 0 or more")
     check_output_path(args.output, force=args.force)
-    if args.prim and Path(args.mesh).suffix.lower() in (".usd", ".usda", ".usdc"):
+    if args.prim:
+        if Path(args.mesh).suffix.lower() not in (".usd", ".usda", ".usdc"):
+            raise ArgumentError(f"--prim {args.prim}: only for a USD file, not {Path(args.mesh).name}")
         from ..usd.mesh_read import read_usd_mesh
 
         src = read_usd_mesh(args.mesh, args.prim)

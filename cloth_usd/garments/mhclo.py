@@ -27,8 +27,9 @@ from ..core.files import models_dir
 from ..core.features import vertex_normals as _vertex_normals
 from .source import GarmentFitError
 
-__all__ = ["Mhclo", "Hm08Map", "read_mhclo", "load_hm08_map", "default_hm08_map_path", "build_hm08_map",
-           "bind_mhclo", "surface_points", "HM08_ARM_BONES"]
+__all__ = ["Mhclo", "Hm08Map", "read_mhclo", "load_hm08_map", "save_hm08_map", "default_hm08_map_path",
+           "build_hm08_map", "makehuman_rest_pose", "mhclo_applies", "bind_mhclo", "surface_points",
+           "HM08_ARM_BONES"]
 
 #: hm08 joint helper groups whose centres give the arm bones' directions, per SMPL joint:
 #: (SMPL joint, head group, tail group).

@@ -261,6 +261,19 @@ def push_out(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarr
     return out
 
 
+def quiet_warp() -> None:
+    """No banner or module-load lines from warp on a command's stdout (read when newton
+    initialises warp): ``config.quiet`` in older warp, ``config.log_level`` in newer (1.19
+    ignores ``quiet``)."""
+    try:
+        import warp
+    except ImportError:
+        return  # _import_engine says what to install
+    warp.config.quiet = True
+    if hasattr(warp.config, "log_level") and hasattr(warp, "LOG_WARNING"):
+        warp.config.log_level = warp.LOG_WARNING
+
+
 def sew(body: BodyModel, betas: np.ndarray, mesh: PatternMesh, config: SewConfig = SewConfig()) -> SewnGarment:
     """Stitch a placed pattern round the T-posed body, merge its seams and drape it.
 
@@ -270,12 +283,7 @@ def sew(body: BodyModel, betas: np.ndarray, mesh: PatternMesh, config: SewConfig
     Raises:
         SimulationError: Newton is missing or the simulation failed.
     """
-    try:
-        import warp
-
-        warp.config.quiet = True  # no banner on a command's stdout (read when newton initialises warp)
-    except ImportError:
-        pass  # _import_engine says what to install
+    quiet_warp()
     newton, wp = _import_engine()
     began = time.perf_counter()
     cfg = config.sim

@@ -326,3 +326,44 @@ def test_makehuman_binding_follows_the_betas(body):
     big = fit_garment(src, "tshirt", np.array([2.0, 2.0]), body=body, mhclo=mh, config=cfg)
     assert np.ptp(big.points[:, 0]) > np.ptp(mean.points[:, 0]) + 0.01
     assert big.report["inside_fraction"] < 0.01
+
+
+def test_cli_fits_a_usd_mesh_z_up_centimetres(tmp_path, body, hmap):
+    """A USD garment (Z-up, centimetres, under a transform, A-posed, with UVs) through the
+    command, no drape: the file's units and axis are used and the garment comes out T-posed
+    on the body, with its polygons and UVs."""
+    from pxr import Gf, Sdf, Usd, UsdGeom, Vt
+
+    rest, posed, faces = _region_mesh(body, [3, 6, 9, 13, 14, 16, 17, 18, 19], pose=hmap.pose)
+    path = tmp_path / "shirt.usda"
+    stage = Usd.Stage.CreateNew(str(path))
+    UsdGeom.SetStageUpAxis(stage, "Z")
+    UsdGeom.SetStageMetersPerUnit(stage, 0.01)
+    UsdGeom.Xform.Define(stage, "/Asset").AddTranslateOp().Set(Gf.Vec3d(0.0, 0.0, 30.0))
+    UsdGeom.Mesh.Define(stage, "/Asset/Other").GetPointsAttr().Set(Vt.Vec3fArray([(0, 0, 0)]))
+    mesh = UsdGeom.Mesh.Define(stage, "/Asset/Shirt")
+    zup = posed * 100.0 @ np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]).T
+    mesh.GetPointsAttr().Set(Vt.Vec3fArray.FromNumpy((zup - [0.0, 0.0, 30.0]).astype(np.float32)))
+    mesh.GetFaceVertexCountsAttr().Set(Vt.IntArray.FromNumpy(np.full(len(faces), 3, dtype=np.int32)))
+    mesh.GetFaceVertexIndicesAttr().Set(Vt.IntArray.FromNumpy(faces.ravel().astype(np.int32)))
+    st = UsdGeom.PrimvarsAPI(mesh).CreatePrimvar("st", Sdf.ValueTypeNames.TexCoord2fArray, UsdGeom.Tokens.vertex)
+    st.Set(Vt.Vec2fArray.FromNumpy(rest[:, :2].astype(np.float32)))
+    stage.GetRootLayer().Save()
+    out = tmp_path / "fitted.usda"
+    assert main(["garment", "fit", str(path), "--prim", "/Asset/Shirt", "-o", str(out), "--category", "tshirt",
+                 "--drape-frames", "0"]) == 0
+    fitted = Usd.Stage.Open(str(out))
+    result = UsdGeom.Mesh(fitted.GetPrimAtPath("/Character/Tshirt"))
+    pts = np.asarray(result.GetPointsAttr().Get(), dtype=np.float64)
+    assert np.median(np.linalg.norm(pts - rest, axis=1)) < 0.01
+    primvar = UsdGeom.PrimvarsAPI(result).GetPrimvar("st")
+    uv = np.asarray(primvar.Get())[np.asarray(primvar.GetIndices())]
+    corners = np.asarray(result.GetFaceVertexIndicesAttr().Get())
+    np.testing.assert_allclose(uv, rest[corners, :2], atol=1e-5)  # each corner keeps its vertex's UV
+
+
+def test_cli_prim_is_for_usd_only(tmp_path, capsys):
+    (tmp_path / "g.obj").write_text("v 0 0 0\n")
+    code = main(["garment", "fit", str(tmp_path / "g.obj"), "--prim", "/X", "-o", str(tmp_path / "o.usda"),
+                 "--category", "tshirt"])
+    assert code == 2 and "--prim /X: only for a USD file" in capsys.readouterr().err
