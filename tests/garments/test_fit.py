@@ -367,3 +367,20 @@ def test_cli_prim_is_for_usd_only(tmp_path, capsys):
     code = main(["garment", "fit", str(tmp_path / "g.obj"), "--prim", "/X", "-o", str(tmp_path / "o.usda"),
                  "--category", "tshirt"])
     assert code == 2 and "--prim /X: only for a USD file" in capsys.readouterr().err
+
+
+def test_binding_applies_only_where_it_can(body, hmap):
+    """The binding needs hm08, the body the map was built for, one line per vertex and
+    hm08 vertices the map covers; otherwise the fit says why and falls back to shape."""
+    import dataclasses
+
+    from cloth_usd.garments.mhclo import mhclo_applies
+
+    mh = read_mhclo(DATA / "makehuman_top.mhclo")
+    assert mhclo_applies(mh, hmap, body, len(mh.refs)) is None
+    assert "not hm08" in mhclo_applies(dataclasses.replace(mh, basemesh="hm07"), hmap, body, len(mh.refs))
+    assert "not the one" in mhclo_applies(mh, hmap, dataclasses.replace(body, sha256="0" * 64), len(mh.refs))
+    assert "the mesh has 5" in mhclo_applies(mh, hmap, body, 5)
+    far = dataclasses.replace(mh, refs=np.full_like(mh.refs, 19000))  # an eyelash helper: not mapped
+    assert "does not cover" in mhclo_applies(far, hmap, body, len(mh.refs))
+    assert mhclo_applies(mh, None, body, len(mh.refs)) == "no hm08 map is installed"
