@@ -63,6 +63,11 @@ class FitConfig:
     arm_poses: tuple[float, ...] = (0.0, 0.25, 0.5, 0.75, 1.0)
     """Fractions of MakeHuman's rest pose (0: T-pose, 1: MakeHuman's A-pose) tried for a
     garment without a binding."""
+    in_between_margin: float = 0.05
+    """Garments are modelled in the T-pose or the A-pose: an arm pose strictly between the
+    first and the last of ``arm_poses`` is taken only if its alignment distance is this
+    fraction smaller (a short sleeve hangs a little below the T-posed arm, which a slightly
+    lowered arm matches as well)."""
     icp_iterations: int = 20
     """Translation updates of the rigid alignment."""
     weight_smoothing: int = 10
@@ -284,9 +289,11 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
                 posed = _pose(body, v_rest, joints, pose)
                 shift, score = _align(pts, category, posed, body.faces, joints, config.icp_iterations)
                 log.debug("up %s arm pose %.2f: mean distance %.1f mm", up, frac, score * 1e3)
-                if best is None or score < best[0]:
-                    best = (score, up, frac, pts + shift, pose, posed)
-        score, up, frac, posed_points, pose, posed = best
+                ends = (config.arm_poses[0], config.arm_poses[-1])
+                ranked = score * (1.0 + config.in_between_margin) if frac not in ends else score
+                if best is None or ranked < best[0]:
+                    best = (ranked, score, up, frac, pts + shift, pose, posed)
+        _, score, up, frac, posed_points, pose, posed = best
         a = associate(posed_points, posed, body.faces)
         weights = np.einsum("nk,nkj->nj", a.barycentric, body.weights[body.faces[a.triangle]])
         weights = _smooth_weights(weights, tri, config.weight_smoothing)

@@ -384,3 +384,20 @@ def test_binding_applies_only_where_it_can(body, hmap):
     far = dataclasses.replace(mh, refs=np.full_like(mh.refs, 19000))  # an eyelash helper: not mapped
     assert "does not cover" in mhclo_applies(far, hmap, body, len(mh.refs))
     assert mhclo_applies(mh, None, body, len(mh.refs)) == "no hm08 map is installed"
+
+
+def test_a_fitted_garment_fits_again_in_place(body):
+    """A garment already T-posed on the body (a fit's output, short sleeves) is taken as
+    T-posed and barely moves: fitting is idempotent."""
+    from cloth_usd.garments.source import read_garment_mesh
+
+    src = read_garment_mesh(DATA / "makehuman_top.obj")
+    cfg = FitConfig(drape_frames=0)
+    first = fit_garment(src, "tshirt", np.zeros(10), body=body, mhclo=read_mhclo(DATA / "makehuman_top.mhclo"),
+                        config=cfg)
+    again = SourceMesh(points=first.points, face_counts=first.face_counts, face_indices=first.face_indices,
+                       uv=first.uv, uv_indices=first.uv_indices, meters_per_unit=1.0, up_axis="Y", source="fitted")
+    second = fit_garment(again, "tshirt", np.zeros(10), body=body, config=cfg)
+    assert second.report["arm_pose"] == 0.0
+    moved = np.linalg.norm(second.points - first.points, axis=1)
+    assert np.median(moved) < 0.01, np.median(moved)
