@@ -2,6 +2,8 @@
 
     .venv-blender/bin/python scripts/render_tiers.py SCENE.usda FRAME OUT.png \\
         LABEL=CACHE.usdc [LABEL=CACHE.usdc ...]      # after bash scripts/test_addon.sh
+    .venv-blender/bin/python scripts/render_tiers.py --frame-file FRAME.npz OUT.png
+        # FRAME.npz from scripts/testset_frame.py: a test-set frame, Newton's panel included
 
 Each cache is a cloth_usd point cache of the scene's garment; the body is computed by
 cloth_usd at that frame (the scene has only the skeleton). Blender's own USD (pxr) reads
@@ -91,32 +93,26 @@ def _cache_points(cache: str, prim: str, frame: float) -> np.ndarray:
     return np.array(value, dtype=np.float64)
 
 
-def main(argv: list[str]) -> None:
-    if len(argv) < 4:
-        raise SystemExit(__doc__)
-    scene_path, frame, out = argv[0], float(argv[1]), Path(argv[2])
-    panels = [a.split("=", 1) for a in argv[3:]]
-    from cloth_usd.render import posed_bodies
-    from cloth_usd.usd.read import open_stage, read_scene
-
-    stage = open_stage(scene_path)
-    scene_data = read_scene(stage)
-    garment = next(g for g in scene_data.garments if g.enabled)
-    ((body_verts, body_faces),) = posed_bodies(stage, scene_data, [frame])
-
+def _render_panels(body_verts: np.ndarray, body_faces: np.ndarray, faces: np.ndarray,
+                   panels: list[tuple[str, np.ndarray]], out: Path, forward=(0.0, 0.0, 1.0)) -> None:
+    """Render the garment points of each ``(label, (N, 3) points)`` panel on the posed body,
+    seen from the front-left of a body facing ``forward`` (cloth_usd's frame, Y up)."""
     scene, camera, target = studio(samples=32, width=420, height=520, lens=60)
-    body = _mesh("Body", body_verts[0], body_faces, (0.8, 0.62, 0.52))
+    body = _mesh("Body", body_verts, body_faces, (0.8, 0.62, 0.52))
     # chest height, from the front-left (Blender Z-up: cloth_usd's y is Blender's z)
-    chest = body_verts[0][body_verts[0][:, 1] > np.quantile(body_verts[0][:, 1], 0.6)].mean(axis=0)
+    chest = body_verts[body_verts[:, 1] > np.quantile(body_verts[:, 1], 0.6)].mean(axis=0)
     centre = np.array([chest[0], -chest[2], chest[1] - 0.05])
     target.location = centre
-    camera.location = centre + np.array([0.55, -1.55, 0.25])
+    yaw = np.arctan2(forward[0], forward[2])
+    side, ahead = 0.55, 1.55  # cloth_usd frame: to the body's left (+X at rest) and in front (+Z)
+    x = side * np.cos(yaw) + ahead * np.sin(yaw)
+    z = -side * np.sin(yaw) + ahead * np.cos(yaw)
+    camera.location = centre + np.array([x, -z, 0.25])
 
     tmp = Path(tempfile.mkdtemp(prefix="cloth_usd_tiers_"))
     images = []
-    for k, (label, cache) in enumerate(panels):
-        pts = _cache_points(cache, garment.prim_path, frame)
-        shirt = _mesh(label, pts, garment.triangles, (0.1, 0.25, 0.62))
+    for k, (label, pts) in enumerate(panels):
+        shirt = _mesh(label, pts, faces, (0.1, 0.25, 0.62))
         scene.render.filepath = str(tmp / f"panel_{k}.png")
         bpy.ops.render.render(write_still=True)
         images.append(bpy.data.images.load(scene.render.filepath))
@@ -124,6 +120,30 @@ def main(argv: list[str]) -> None:
         print(f"{label}: rendered", flush=True)
     del body
     save_row(scene, images, out)
+
+
+def main(argv: list[str]) -> None:
+    if len(argv) == 3 and argv[0] == "--frame-file":
+        data = np.load(argv[1])
+        panels = [(str(label), pts) for label, pts in zip(data["labels"], data["points"])]
+        _render_panels(data["body_vertices"], data["body_faces"], data["garment_faces"], panels, Path(argv[2]),
+                       forward=data["forward"])
+        print(f"wrote {argv[2]} ({', '.join(label for label, _ in panels)}; {data['sequence']}, "
+              f"frame {int(data['frame'])})")
+        return
+    if len(argv) < 4:
+        raise SystemExit(__doc__)
+    scene_path, frame, out = argv[0], float(argv[1]), Path(argv[2])
+    from cloth_usd.render import posed_bodies
+    from cloth_usd.usd.read import open_stage, read_scene
+
+    stage = open_stage(scene_path)
+    scene_data = read_scene(stage)
+    garment = next(g for g in scene_data.garments if g.enabled)
+    ((body_verts, body_faces),) = posed_bodies(stage, scene_data, [frame])
+    panels = [(label, _cache_points(cache, garment.prim_path, frame)) for label, cache in
+              (a.split("=", 1) for a in argv[3:])]
+    _render_panels(body_verts[0], body_faces, garment.triangles, panels, out)
     print(f"wrote {out} ({', '.join(label for label, _ in panels)}, time code {frame:g})")
 
 
