@@ -14,12 +14,13 @@ from functools import cached_property
 import numpy as np
 from scipy import sparse
 
+from ..errors import ArgumentError
 from .association import Association, associate
 from .body import BodyModel, blend_skin, joint_transforms, pose_feature, shape_body
 from .rotations import axis_angle_to_matrix
 from .smpl import NUM_JOINTS
 
-__all__ = ["SkinBinding", "bind_garment", "skin_garment"]
+__all__ = ["SkinBinding", "bind_garment", "harmonic_weights", "skin_garment"]
 
 
 @dataclass(frozen=True)
@@ -42,12 +43,19 @@ class SkinBinding:
         return sparse.csr_matrix(self.weights)
 
 
-def bind_garment(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray) -> SkinBinding:
+def bind_garment(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray, *,
+                 faces: np.ndarray | None = None, free_beyond: float | None = None) -> SkinBinding:
     """Associate a garment with the unposed body of shape ``betas`` and interpolate weights.
 
     Args:
         betas: (B',) shape coefficients.
         rest_points: (N, 3) rest garment points [m], canonical body frame.
+        faces: (M, 3) int garment triangles; needed with ``free_beyond``.
+        free_beyond: vertices farther than this from the body [m] take the harmonic
+            interpolation of the others' weights over the garment mesh
+            (:func:`harmonic_weights`) instead of their nearest body point's: a skirt hanging
+            between the legs then follows both legs rather than tearing along the line where
+            its nearest body point changes leg. None: every vertex its nearest point's.
     """
     v_shaped, joints = shape_body(body, betas)
     assoc = associate(rest_points, v_shaped, body.faces)
@@ -57,8 +65,58 @@ def bind_garment(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray) ->
     posedirs = None
     if body.posedirs is not None:
         posedirs = np.einsum("nk,nkcp->ncp", assoc.barycentric, body.posedirs[corners])
+    if free_beyond is not None:
+        if faces is None:
+            raise ArgumentError("bind_garment: free_beyond needs the garment's faces")
+        free = assoc.distance > free_beyond
+        if free.any() and not free.all():
+            weights = harmonic_weights(weights, faces, free)
+            weights = np.clip(weights, 0.0, None)
+            weights /= weights.sum(axis=1, keepdims=True)
+            if posedirs is not None:
+                n = posedirs.shape[0]
+                posedirs = harmonic_weights(posedirs.reshape(n, -1), faces, free).reshape(posedirs.shape)
     return SkinBinding(rest_points=np.asarray(rest_points, dtype=np.float64), joints=joints,
                        association=assoc, weights=weights, posedirs=posedirs)
+
+
+def harmonic_weights(values: np.ndarray, faces: np.ndarray, free: np.ndarray) -> np.ndarray:
+    """Per-vertex values with the ``free`` vertices' replaced by the harmonic interpolation
+    of the others' over the mesh graph (uniform Laplacian: each free vertex the mean of its
+    neighbours); a free component that touches no fixed vertex keeps its values.
+
+    Args:
+        values: (N, C) float64 per-vertex values (skinning weights: rows that sum to 1 keep
+            summing to 1).
+        faces: (M, 3) int triangles.
+        free: (N,) bool vertices to interpolate.
+    Returns:
+        (N, C) float64.
+    """
+    from scipy.sparse import csgraph, linalg as splinalg
+
+    n = values.shape[0]
+    f = np.asarray(faces, dtype=np.int64)
+    i = np.concatenate([f[:, 0], f[:, 1], f[:, 2], f[:, 1], f[:, 2], f[:, 0]])
+    j = np.concatenate([f[:, 1], f[:, 2], f[:, 0], f[:, 0], f[:, 1], f[:, 2]])
+    adj = sparse.csr_matrix((np.ones(len(i)), (i, j)), shape=(n, n))
+    adj.data[:] = 1.0  # duplicate edges summed: back to 0/1
+    lap = sparse.diags(np.asarray(adj.sum(axis=1)).ravel()) - adj
+    free = np.asarray(free, dtype=bool).copy()
+    # a free component with no fixed vertex has no boundary condition: leave it as it is
+    _, label = csgraph.connected_components(adj[free][:, free], directed=False)
+    anchored = np.zeros(label.max() + 1 if label.size else 0, dtype=bool)
+    touches = np.asarray(adj[free][:, ~free].sum(axis=1)).ravel() > 0
+    np.logical_or.at(anchored, label, touches)
+    idx = np.flatnonzero(free)
+    free[idx[~anchored[label]]] = False
+    if not free.any():
+        return values.copy()
+    out = values.astype(np.float64).copy()
+    a = lap[free][:, free].tocsc()
+    b = -(lap[free][:, ~free] @ out[~free])
+    out[free] = splinalg.splu(a).solve(np.asarray(b))
+    return out
 
 
 def skin_garment(binding: SkinBinding, poses: np.ndarray, transl: np.ndarray,
