@@ -1,7 +1,9 @@
 """A close-up Cycles render of one frame of baked caches side by side, on the body.
 
     .venv-blender/bin/python scripts/render_tiers.py SCENE.usda FRAME OUT.png \\
-        LABEL=CACHE.usdc [LABEL=CACHE.usdc ...]      # after bash scripts/test_addon.sh
+        LABEL=CACHE.usdc [LABEL=CACHE.usdc ...] [--full] [--yaw=DEG]  # after bash scripts/test_addon.sh
+        # --full: the whole figure (a dress, trousers); --yaw: the camera turned about the
+        # up axis with a character that faces away from +Z
     .venv-blender/bin/python scripts/render_tiers.py --frame-file FRAME.npz OUT.png
         # FRAME.npz from scripts/testset_frame.py: a test-set frame, Newton's panel included
 
@@ -94,17 +96,21 @@ def _cache_points(cache: str, prim: str, frame: float) -> np.ndarray:
 
 
 def _render_panels(body_verts: np.ndarray, body_faces: np.ndarray, faces: np.ndarray,
-                   panels: list[tuple[str, np.ndarray]], out: Path, forward=(0.0, 0.0, 1.0)) -> None:
+                   panels: list[tuple[str, np.ndarray]], out: Path, forward=(0.0, 0.0, 1.0), *,
+                   full: bool = False) -> None:
     """Render the garment points of each ``(label, (N, 3) points)`` panel on the posed body,
-    seen from the front-left of a body facing ``forward`` (cloth_usd's frame, Y up)."""
-    scene, camera, target = studio(samples=32, width=420, height=520, lens=60)
+    seen from the front-left of a body facing ``forward`` (cloth_usd's frame, Y up): the chest
+    and a sleeve, or with ``full`` the whole figure (a dress, trousers)."""
+    scene, camera, target = studio(samples=32, width=420, height=520 if not full else 640, lens=60)
     body = _mesh("Body", body_verts, body_faces, (0.8, 0.62, 0.52))
     # chest height, from the front-left (Blender Z-up: cloth_usd's y is Blender's z)
     chest = body_verts[body_verts[:, 1] > np.quantile(body_verts[:, 1], 0.6)].mean(axis=0)
+    if full:
+        chest = 0.5 * (body_verts.min(axis=0) + body_verts.max(axis=0)) + [0.0, 0.05, 0.0]
     centre = np.array([chest[0], -chest[2], chest[1] - 0.05])
     target.location = centre
     yaw = np.arctan2(forward[0], forward[2])
-    side, ahead = 0.55, 1.55  # cloth_usd frame: to the body's left (+X at rest) and in front (+Z)
+    side, ahead = (0.55, 1.55) if not full else (0.9, 3.2)  # to the body's left (+X at rest), in front (+Z)
     x = side * np.cos(yaw) + ahead * np.sin(yaw)
     z = -side * np.sin(yaw) + ahead * np.cos(yaw)
     camera.location = centre + np.array([x, -z, 0.25])
@@ -131,6 +137,9 @@ def main(argv: list[str]) -> None:
         print(f"wrote {argv[2]} ({', '.join(label for label, _ in panels)}; {data['sequence']}, "
               f"frame {int(data['frame'])})")
         return
+    full = "--full" in argv
+    yaw = next((float(a.split("=", 1)[1]) for a in argv if a.startswith("--yaw=")), 0.0)
+    argv = [a for a in argv if a != "--full" and not a.startswith("--yaw=")]
     if len(argv) < 4:
         raise SystemExit(__doc__)
     scene_path, frame, out = argv[0], float(argv[1]), Path(argv[2])
@@ -143,7 +152,8 @@ def main(argv: list[str]) -> None:
     ((body_verts, body_faces),) = posed_bodies(stage, scene_data, [frame])
     panels = [(label, _cache_points(cache, garment.prim_path, frame)) for label, cache in
               (a.split("=", 1) for a in argv[3:])]
-    _render_panels(body_verts[0], body_faces, garment.triangles, panels, out)
+    forward = (np.sin(np.radians(yaw)), 0.0, np.cos(np.radians(yaw)))
+    _render_panels(body_verts[0], body_faces, garment.triangles, panels, out, full=full, forward=forward)
     print(f"wrote {out} ({', '.join(label for label, _ in panels)}, time code {frame:g})")
 
 
