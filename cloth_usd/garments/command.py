@@ -88,6 +88,20 @@ def _betas(values: list[float]):
     return betas
 
 
+def _write(args: argparse.Namespace, body, betas, *, points, faces, st, st_indices, key: str, report: dict):
+    """Write the garment file (the report under ``custom[key]``) and ``--report``; returns its path."""
+    from ..usd.garment_file import write_garment_file
+    from .make import body_joints
+
+    path = write_garment_file(args.output, points=points, faces=faces, st=st, st_indices=st_indices,
+                              category=args.category, betas=betas, joints=body_joints(body, betas),
+                              custom={key: json.dumps(report)}, force=args.force)
+    if args.report:
+        with open(args.report, "w", encoding="utf-8") as f:
+            json.dump(report, f, indent=2)
+    return path
+
+
 def _fit(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -95,10 +109,8 @@ def _fit(args: argparse.Namespace) -> int:
 
     from ..core.body import load_body_model
     from ..errors import ArgumentError
-    from ..usd.garment_file import write_garment_file
     from ..usd.write import check_output_path
     from .fit import FitConfig, fit_garment, mhclo_beside
-    from .make import body_joints
     from .mhclo import read_mhclo
     from .source import read_garment_mesh
 
@@ -121,13 +133,8 @@ def _fit(args: argparse.Namespace) -> int:
                          config=FitConfig(drape_frames=args.drape_frames))
     report = {**fitted.report, "category": args.category, "betas": [float(b) for b in betas]}
     faces = np.split(fitted.face_indices, np.cumsum(fitted.face_counts)[:-1])
-    path = write_garment_file(args.output, points=fitted.points, faces=faces, st=fitted.uv,
-                              st_indices=fitted.uv_indices, category=args.category, betas=betas,
-                              joints=body_joints(body, betas), custom={"garment_fit": json.dumps(report)},
-                              force=args.force)
-    if args.report:
-        with open(args.report, "w", encoding="utf-8") as f:
-            json.dump(report, f, indent=2)
+    path = _write(args, body, betas, points=fitted.points, faces=faces, st=fitted.uv, st_indices=fitted.uv_indices,
+                  key="garment_fit", report=report)
     sys.stdout.write(f"wrote {path}: {args.category} fitted by {report['method']} "
                      f"({report['units_m']:g} m per unit, {report['up_axis']} up, arm pose {report['arm_pose']:g}), "
                      f"{report['vertices']} vertices, median {report['median_distance_mm']:.1f} mm from the body, "
@@ -141,19 +148,12 @@ def run(args: argparse.Namespace) -> int:
         return _presets()
     if args.garment_command == "fit":
         return _fit(args)
-    import numpy as np
-
     from ..core.body import load_body_model
-    from ..errors import ArgumentError
-    from ..usd.garment_file import write_garment_file
     from ..usd.write import check_output_path
     from .designs import design_from_params
-    from .make import DEFAULT_VERTICES, body_joints, make_garment
+    from .make import DEFAULT_VERTICES, make_garment
 
-    if len(args.betas) > 10 or not all(np.isfinite(args.betas)):
-        raise ArgumentError(f"--betas: at most 10 finite values, got {len(args.betas)}")
-    betas = np.zeros(10)
-    betas[: len(args.betas)] = args.betas
+    betas = _betas(args.betas)
     params = _parse_params(args.param)
     design_from_params(args.category, args.preset, params)  # a bad parameter fails before any work
     check_output_path(args.output, force=args.force)
@@ -162,13 +162,8 @@ def run(args: argparse.Namespace) -> int:
                         target_vertices=args.vertices or DEFAULT_VERTICES)
     report = {**made.report(), "preset": args.preset, "betas": [float(b) for b in betas],
               "measurements": made.measurements.to_json()}
-    path = write_garment_file(args.output, points=made.points, faces=made.faces, st=made.st,
-                              st_indices=made.st_indices, category=args.category, betas=betas,
-                              joints=body_joints(body, betas), custom={"garment": json.dumps(report)},
-                              force=args.force)
-    if args.report:
-        with open(args.report, "w", encoding="utf-8") as f:
-            json.dump(report, f, indent=2)
+    path = _write(args, body, betas, points=made.points, faces=made.faces, st=made.st, st_indices=made.st_indices,
+                  key="garment", report=report)
     sys.stdout.write(f"wrote {path}: {args.category} {args.preset or ''} {report['vertices']} vertices, "
                      f"{report['panels']} panels, edge stretch vs pattern p99 {report['stretch_p99']:.3f} "
                      f"(max {report['stretch_max']:.3f}), {report['seconds']:.0f} s\n")
