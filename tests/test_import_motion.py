@@ -14,7 +14,7 @@ from scipy.spatial.transform import Rotation
 
 pytest.importorskip("pxr", reason="import-motion writes USD (pip install usd-core)")
 
-from pxr import Usd, UsdSkel  # noqa: E402
+from pxr import Sdf, Usd, UsdSkel  # noqa: E402
 
 import cloth_usd  # noqa: E402
 from cloth_usd.cli import main  # noqa: E402
@@ -217,3 +217,22 @@ def test_bad_arguments(tmp_path):
     with pytest.raises(GarmentError, match=r"--garment .*empty\.usda: holds no garment"):
         import_motion(CLIPS["cmu-mb"], tmp_path / "shot.usda", garments=[empty])
     assert not (tmp_path / "shot.usda").exists()
+
+
+def test_a_garment_in_another_folder_is_referenced_relatively_without_a_usd_warning(tmp_path, capfd):
+    """The shot is authored beside its output, so the relative reference resolves while it is
+    made (authored in memory, USD printed "Could not open asset" for every such garment)."""
+    import shutil
+
+    out, garments = tmp_path / "shots", tmp_path / "garments"
+    out.mkdir()
+    garments.mkdir()
+    shutil.copy(SAMPLE, garments / "shirt.usda")  # "../garments/shirt.usda" does not resolve from the cwd
+    capfd.readouterr()
+    import_motion(CLIPS["cmu-mb"], out / "shot.usda", garments=[garments / "shirt.usda"])
+    err = capfd.readouterr().err
+    assert "Could not open asset" not in err, err
+    layer = Sdf.Layer.FindOrOpen(str(out / "shot.usda"))
+    refs = layer.GetPrimAtPath(Sdf.Path("/Character/Tshirt")).referenceList.GetAddedOrExplicitItems()
+    assert [r.assetPath for r in refs] == ["../garments/shirt.usda"]
+    assert not list(out.glob(".*tmp*"))  # no temporary file left

@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
-from pxr import Gf, Sdf, Usd, UsdGeom
+from pxr import Gf, Sdf, Tf, Usd, UsdGeom
 
 from ..errors import ArgumentError, GarmentError, OutputWriteError, SceneError
 from .author import author_skeleton, set_stage_metadata
@@ -88,7 +88,7 @@ def _body_betas(stage, prim) -> tuple[str | None, np.ndarray | None]:
 def write_motion_stage(output: Path, *, skeleton_path: str, poses: np.ndarray, root_positions: np.ndarray,
                        times: np.ndarray, fps: float, betas: np.ndarray, gender: str, joints: np.ndarray,
                        garments: Sequence[GarmentSource], custom_data: Mapping[str, Any]) -> tuple[str, ...]:
-    """Author the shot in memory and write it atomically (Y up, metres); returns the garments'
+    """Author the shot and write it atomically (Y up, metres); returns the garments'
     prim paths.
 
     Args:
@@ -101,7 +101,35 @@ def write_motion_stage(output: Path, *, skeleton_path: str, poses: np.ndarray, r
     Raises:
         OutputWriteError: USD could not write the file.
     """
-    stage = Usd.Stage.CreateInMemory()
+    # Authored in a temporary file beside the output, so that the garments' relative
+    # references resolve as they will in the output (in memory, USD warns it cannot open them).
+    fd, tmp = tempfile.mkstemp(prefix=f".{output.stem}.", suffix=f".tmp{output.suffix}", dir=output.parent)
+    os.close(fd)
+    os.unlink(tmp)
+    try:
+        try:
+            stage = Usd.Stage.CreateNew(tmp)
+        except Tf.ErrorException as exc:
+            raise OutputWriteError(f"{output}: USD could not create the stage (at {tmp}): {exc}") from None
+        placed = _author_shot(stage, output, skeleton_path=skeleton_path, poses=poses, root_positions=root_positions,
+                              times=times, fps=fps, betas=betas, gender=gender, joints=joints, garments=garments)
+        layer = stage.GetRootLayer()
+        layer.customLayerData = dict(custom_data)
+        if not layer.Save():
+            raise OutputWriteError(f"{output}: USD could not write the stage (to {tmp}); check the folder's "
+                                   "permissions and free space")
+        del stage, layer
+        os.replace(tmp, output)
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return placed
+
+
+def _author_shot(stage: Usd.Stage, output: Path, *, skeleton_path: str, poses: np.ndarray, root_positions: np.ndarray,
+                 times: np.ndarray, fps: float, betas: np.ndarray, gender: str, joints: np.ndarray,
+                 garments: Sequence[GarmentSource]) -> tuple[str, ...]:
+    """The character, its motion and the garments on ``stage``; the garments' prim paths."""
     set_stage_metadata(stage, up_axis="Y", meters_per_unit=1.0, fps=fps, start=times[0], end=times[-1])
     skel = author_skeleton(stage, skeleton_path, joint_positions=joints, betas=betas, gender=gender,
                            poses=poses, root_positions=root_positions, times=times)
@@ -122,18 +150,6 @@ def write_motion_stage(output: Path, *, skeleton_path: str, poses: np.ndarray, r
             prim.GetReferences().AddReference(asset, Sdf.Path(prim_path))
             prim.CreateRelationship("cloth:body", custom=True).SetTargets([Sdf.Path(skel)])
             placed.append(str(prim.GetPath()))
-    layer = stage.GetRootLayer()
-    layer.customLayerData = dict(custom_data)
-    fd, tmp = tempfile.mkstemp(prefix=f".{output.stem}.", suffix=f".tmp{output.suffix}", dir=output.parent)
-    os.close(fd)
-    try:
-        if not layer.Export(tmp):
-            raise OutputWriteError(f"{output}: USD could not write the stage (to {tmp}); check the folder's "
-                                   "permissions and free space")
-        os.replace(tmp, output)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
     return tuple(placed)
 
 
