@@ -134,11 +134,13 @@ def _parser() -> argparse.ArgumentParser:
     tr.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
     tr.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
 
-    tg = add_command("train-garment", help="train and export a model bundle for one garment of your own, from its "
-                                           "mesh alone (the physics objective; no simulation)")
-    tg.add_argument("scene", help="USD stage with the garment (a cloth:category Mesh on an SMPL character)")
+    tg = add_command("train-garment", help="train and export a model bundle for a garment of your own (or several "
+                                           "of one category), from the mesh alone (the physics objective; no "
+                                           "simulation)")
+    tg.add_argument("scene", nargs="+", help="USD stage(s), each with the garment (a cloth:category Mesh on an SMPL "
+                                             "character); several train one bundle for their category")
     tg.add_argument("-o", "--out", required=True, help="bundle folder to write (bake with --models OUT)")
-    tg.add_argument("--garment", metavar="PRIM", help="the garment prim (default: the stage's only garment)")
+    tg.add_argument("--garment", metavar="PRIM", help="the garment prim (default: each stage's only garment)")
     tg.add_argument("--name", help="bundle name (default: the bundle folder's name)")
     tg.add_argument("--work", metavar="DIR", help="folder for the data config and the two runs (default: OUT.work)")
     tg.add_argument("--motions", metavar="JSON", help="extra training motions: a JSON list of train_motions "
@@ -472,6 +474,7 @@ def _train_garment(args: argparse.Namespace) -> int:
 
     from .core.body import load_body_model, shape_body
     from .core.frames import canonical_rest_points, rest_orientation
+    from .datagen.factory import OwnGarment
     from .errors import ArgumentError
     from .nn.own_garment import OwnGarmentPlan, train_own_garment
     from .usd.read import open_stage, read_scene
@@ -483,18 +486,26 @@ def _train_garment(args: argparse.Namespace) -> int:
             motions = tuple(json.loads(Path(args.motions).read_text()))
         except (OSError, ValueError, TypeError) as exc:
             raise ArgumentError(f"--motions {args.motions}: not a readable JSON list ({exc})") from None
-    scene = read_scene(open_stage(args.scene), joint_map=args.joint_map)
-    garments = [g for g in scene.garments if args.garment in (None, g.prim_path)]
-    if len(garments) != 1:
-        found = ", ".join(g.prim_path for g in scene.garments) or "none"
-        raise ArgumentError(f"{args.scene}: " + (f"no garment {args.garment} (garments: {found})" if args.garment
-                            else f"name the garment with --garment (garments: {found})"))
-    garment = garments[0]
-    char = next(c for c in scene.characters if c.prim_path == garment.body_path)
     body = load_body_model()
-    joints = shape_body(body, char.betas)[1]
-    rest = canonical_rest_points(garment.rest_points, char.rest_root_position,
-                                 rest_orientation(char.rest_joints, joints), joints)
+    owns, prims = [], []
+    for path in args.scene:
+        scene = read_scene(open_stage(path), joint_map=args.joint_map)
+        garments = [g for g in scene.garments if args.garment in (None, g.prim_path)]
+        if len(garments) != 1:
+            found = ", ".join(g.prim_path for g in scene.garments) or "none"
+            raise ArgumentError(f"{path}: " + (f"no garment {args.garment} (garments: {found})" if args.garment
+                                else f"name the garment with --garment (garments: {found})"))
+        garment = garments[0]
+        char = next(c for c in scene.characters if c.prim_path == garment.body_path)
+        joints = shape_body(body, char.betas)[1]
+        rest = canonical_rest_points(garment.rest_points, char.rest_root_position,
+                                     rest_orientation(char.rest_joints, joints), joints)
+        if owns and garment.category.value != owns[0].category:
+            raise ArgumentError(f"{path} <{garment.prim_path}>: a {garment.category.value}, but {args.scene[0]}'s "
+                                f"garment is a {owns[0].category}: one bundle serves one category")
+        owns.append(OwnGarment(vertices=rest, faces=np.asarray(garment.triangles, dtype=np.int64),
+                               betas=np.asarray(char.betas, dtype=np.float64), category=garment.category.value))
+        prims.append(garment.prim_path)
     if args.threads:
         import torch
 
@@ -506,14 +517,16 @@ def _train_garment(args: argparse.Namespace) -> int:
         sys.stdout.flush()
 
     out = Path(args.out)
-    result = train_own_garment(rest, garment.triangles, char.betas, out, name=args.name or out.name,
-                               category=garment.category, work_dir=args.work, motions=motions, mocap_dir=args.mocap,
-                               plan=plan, force=args.force, device=args.device, body=body, progress=show)
+    result = train_own_garment(owns, out, name=args.name or out.name, work_dir=args.work, motions=motions,
+                               mocap_dir=args.mocap, plan=plan, force=args.force, device=args.device, body=body,
+                               progress=show)
     t = result.seconds
-    sys.stdout.write(f"wrote bundle {result.bundle} for {garment.prim_path} ({rest.shape[0]} vertices) in "
+    what = f"{prims[0]} ({owns[0].vertices.shape[0]} vertices)" if len(owns) == 1 else \
+        f"{len(owns)} {owns[0].category} garments ({', '.join(str(g.vertices.shape[0]) for g in owns)} vertices)"
+    sys.stdout.write(f"wrote bundle {result.bundle} for {what} in "
                      f"{t['total'] / 60:.1f} min (coarse {t['coarse'] / 60:.1f}, detail {t['detail'] / 60:.1f}, "
                      f"export {t['export']:.0f} s); runs and config in {result.work_dir}\n"
-                     f"bake with: cloth-usd bake {args.scene} -o CACHE.usdc --tier detail --models {result.bundle}\n")
+                     f"bake with: cloth-usd bake {args.scene[0]} -o CACHE.usdc --tier detail --models {result.bundle}\n")
     return 0
 
 

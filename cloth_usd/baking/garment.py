@@ -15,8 +15,8 @@ from ..core.graph import directed_edges
 from ..core.guard import GuardLimits, check_frames
 from ..core.limits import BETA_LIMIT, betas_outside, pose_outliers
 from ..core.provenance import GarmentReport
-from ..core.scene import Category, Character, Garment, Tier
-from ..core.skinning import SkinBinding, bind_garment, skin_garment
+from ..core.scene import Character, Garment, Tier
+from ..core.skinning import SkinBinding, bind_worn, skin_garment
 from ..errors import GarmentError
 from ..runtime.bundle import ModelBundle
 from ..runtime.garment import LearnedGarment
@@ -29,10 +29,6 @@ log = logging.getLogger(__name__)
 #: A garment whose rest vertices lie further than this from the body surface on
 #: average [m] is warned about: its ``cloth:body`` may target the wrong character.
 FAR_FROM_BODY = 0.10
-#: A dress's vertices farther than this from the body [m] take weights interpolated over the
-#: garment (:func:`~cloth_usd.core.skinning.bind_garment` ``free_beyond``): the skirt between
-#: the legs follows both legs instead of tearing where its nearest body point changes leg.
-SKIRT_FREE_BEYOND = 0.01
 #: Garment vertices per learned-model call when ``bake(batch_size=None)``: the model's
 #: activations grow with frames x vertices (about 100 MiB per 4000-vertex frame at width 0.125).
 LEARNED_BATCH_VERTICES = 16_000
@@ -83,8 +79,7 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
     rest = motion.rest_points(garment.rest_points)
 
     def prepare() -> tuple[SkinBinding, Any]:
-        free = SKIRT_FREE_BEYOND if garment.category is Category.DRESS else None
-        binding = bind_garment(body, char.betas, rest, faces=garment.triangles, free_beyond=free)
+        binding = bind_worn(body, char.betas, rest, garment.triangles, garment.category)
         if tier is Tier.SKINNING:
             return binding, None
         return binding, LearnedGarment(bundle, body, char.betas, rest, garment.triangles, binding=binding)

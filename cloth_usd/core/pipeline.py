@@ -35,11 +35,12 @@ from .features import attributes, coarse_features, detail_features, vertex_norma
 from .fit import FitModel, pair_distances
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
-from .postprocess import DEFAULT_MARGIN, push_out
-from .skinning import SkinBinding, bind_garment, skin_garment
+from .postprocess import DEFAULT_MARGIN, nearest_body_points, push_out
+from .scene import Category
+from .skinning import SkinBinding, bind_worn, skin_garment
 
-__all__ = ["GarmentPair", "BodyPatch", "body_patch", "PosedBody", "prepare_pair", "pose_body", "coarse_model_features",
-           "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn", "CoarseBase", "coarse_base_points"]
+__all__ = ["GarmentPair", "BodyPatch", "body_patch", "body_under", "CONTACT_REACH", "PosedBody", "prepare_pair",
+           "pose_body", "coarse_model_features", "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn", "CoarseBase", "coarse_base_points"]
 
 #: A coarse model: ``(features (B, N, 7), graph) -> delta (B, N, 3) [m]``.
 CoarseFn = Callable[[np.ndarray, MeshGraph], np.ndarray]
@@ -103,18 +104,48 @@ class BodyPatch:
     """(M', 3) int64 the body triangles touching an associated vertex, indexing ``vertices``."""
     assoc: np.ndarray
     """(N,) int64 each garment vertex's associated body vertex, indexing ``vertices``."""
+    contact: np.ndarray
+    """(V'',) int64 the body under the garment, indexing ``vertices``: the associated body
+    vertices and every body vertex within :data:`CONTACT_REACH` of the rest garment, each
+    once. The post-process (and the physics objective's nearest contact) looks here for the
+    body point nearest to a garment vertex; their normals are exact."""
 
 
-def body_patch(body_faces: np.ndarray, assoc_vertex: np.ndarray) -> BodyPatch:
-    """The :class:`BodyPatch` of a garment associated with ``assoc_vertex`` (N,) body vertices."""
+def body_patch(body_faces: np.ndarray, assoc_vertex: np.ndarray, near: np.ndarray | None = None) -> BodyPatch:
+    """The :class:`BodyPatch` of a garment associated with ``assoc_vertex`` (N,) body vertices.
+
+    Args:
+        near: (R,) int more body vertices to take into :attr:`BodyPatch.contact` (the body
+            under the garment); None: the associated ones alone.
+    """
     faces = np.asarray(body_faces, dtype=np.int64)
     assoc_vertex = np.asarray(assoc_vertex, dtype=np.int64)
+    touched = assoc_vertex if near is None else np.union1d(assoc_vertex, np.asarray(near, dtype=np.int64))
     used = np.zeros(int(faces.max(initial=-1)) + 1 if faces.size else 0, bool)
-    used[assoc_vertex[assoc_vertex < len(used)]] = True
+    used[touched[touched < len(used)]] = True
     ring = faces[used[faces].any(axis=1)] if faces.size else faces
-    vertices = np.union1d(np.unique(ring), assoc_vertex)
+    vertices = np.union1d(np.unique(ring), touched)
     return BodyPatch(vertices=vertices, faces=np.searchsorted(vertices, ring),
-                     assoc=np.searchsorted(vertices, assoc_vertex))
+                     assoc=np.searchsorted(vertices, assoc_vertex), contact=np.searchsorted(vertices, np.unique(touched)))
+
+
+#: Body vertices within this distance of the rest garment [m] count as the body under it
+#: (:attr:`BodyPatch.contact`): where a moved garment vertex can meet the body, such as the
+#: front of a thigh swung into a skirt, though no garment vertex is bound to it.
+CONTACT_REACH = 0.05
+
+
+def body_under(v_shaped: np.ndarray, rest_points: np.ndarray, reach: float = CONTACT_REACH) -> np.ndarray:
+    """(R,) int64 the body vertices within ``reach`` [m] of a rest garment vertex.
+
+    Args:
+        v_shaped: (V, 3) the unposed body [m]; rest_points: (N, 3) the rest garment [m].
+    """
+    from scipy.spatial import cKDTree
+
+    d, _ = cKDTree(np.asarray(rest_points, dtype=np.float64)).query(np.asarray(v_shaped, dtype=np.float64),
+                                                                      distance_upper_bound=reach)
+    return np.flatnonzero(np.isfinite(d)).astype(np.int64)
 
 
 @dataclass(frozen=True)
@@ -135,7 +166,8 @@ class PosedBody:
 
 
 def prepare_pair(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray, faces: np.ndarray,
-                 fit: FitModel, *, binding: SkinBinding | None = None) -> GarmentPair:
+                 fit: FitModel, *, binding: SkinBinding | None = None,
+                 category: Category | str = Category.TSHIRT) -> GarmentPair:
     """Association, graph and fit attribute of one garment-body pair.
 
     Args:
@@ -144,18 +176,21 @@ def prepare_pair(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray, fa
         rest_points: (N, 3) garment rest points [m], canonical body frame.
         faces: (M, 3) int garment triangles.
         fit: the fit attribute's factor-analysis model (its anchors must index ``body``).
-        binding: a skinning binding of the same pair to reuse (made here if None).
+        binding: a skinning binding of the same pair to reuse (made here if None, as
+            :func:`~cloth_usd.core.skinning.bind_worn` binds a garment of ``category``).
+        category: the garment's category (how it is bound when ``binding`` is None).
     """
     betas = np.asarray(betas, dtype=np.float64)
     rest_points = np.asarray(rest_points, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    binding = binding if binding is not None else bind_garment(body, betas, rest_points)
+    binding = binding if binding is not None else bind_worn(body, betas, rest_points, faces, category)
     v_shaped, joints = shape_body(body, betas)
     graph = build_graph(faces, rest_points)
     d = pair_distances(rest_points, binding.association, v_shaped, fit.anchors)
     alpha = np.asarray(fit.transform(d), dtype=np.float64)
+    patch = body_patch(body.faces, binding.association.vertex, body_under(v_shaped, rest_points))
     return GarmentPair(betas=betas, faces=faces, binding=binding, v_shaped=v_shaped, joints=joints,
-                       graph=graph, alpha=alpha, patch=body_patch(body.faces, binding.association.vertex))
+                       graph=graph, alpha=alpha, patch=patch)
 
 
 def pose_body(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray) -> PosedBody:
@@ -220,7 +255,9 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
 
     ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
     ``coarse_base``, as the coarse model was trained), ``M_detail = M_coarse + detail(...)``,
-    then the post-process (:func:`~cloth_usd.core.postprocess.push_out`).
+    then the post-process (:func:`~cloth_usd.core.postprocess.push_out`, against the
+    associated body vertex nearest to each garment vertex in that frame:
+    :func:`~cloth_usd.core.postprocess.nearest_body_points`).
 
     Args:
         poses: (T, 72) axis-angle [rad]; transl: (T, 3) root translation [m].
@@ -261,5 +298,7 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
         if detail is not None:
             feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])
             m = m + detail(feats, attrs, pair.graph)
-        points[lo:hi], moved[lo:hi] = push_out(m, posed.garment_points, posed.garment_normals, margin=margin)
+        contact = pair.patch.contact
+        b, n = nearest_body_points(m, posed.patch_points[:, contact], posed.patch_normals[:, contact])
+        points[lo:hi], moved[lo:hi] = push_out(m, b, n, margin=margin)
     return (points if frame is None else frame.to_world(points)), moved

@@ -24,6 +24,7 @@ from ..core.association import associate
 from ..core.body import load_body_model, posed_vertices, shape_body
 from ..core.files import check_keys, read_config
 from ..core.fit import FitModel, common_anchors, fit_factor_analysis, pair_distances
+from ..core.scene import Category
 from ..errors import ArgumentError
 from ..core.transfer import transfer_garment
 from .bodies import BodyShape, body_shapes
@@ -34,7 +35,7 @@ from .simulate import SimConfig
 from .motion import MotionKind, MotionSpec, generate
 from .tshirt import make_tshirt, tshirt_variants
 
-__all__ = ["FactoryConfig", "MOCAP_ENV", "OWN_BODY", "OwnGarment", "save_own_garment", "load_own_garment", "load_config", "plan_jobs", "drape_pairs", "run_factory"]
+__all__ = ["FactoryConfig", "MOCAP_ENV", "OWN_BODY", "OwnGarment", "own_garment_files", "save_own_garment", "load_own_garment", "load_config", "plan_jobs", "drape_pairs", "run_factory"]
 
 #: The environment variable naming the mocap folder when neither the config nor ``--mocap`` does.
 MOCAP_ENV = "CLOTH_USD_MOCAP"
@@ -82,11 +83,12 @@ class FactoryConfig:
     """The per-frame error floor (a :class:`FloorSpec`'s fields): for some of the sequences
     to be simulated, a few of their frames' poses held until the cloth settles, each its own
     sequence of split ``floor`` (see :mod:`cloth_usd.datagen.floor`). None: none."""
-    garment: str | None = None
-    """A garment of the user's own instead of the generated T-shirts: a ``.npz`` with
-    ``vertices`` (N, 3) [m] (worn by the rest body, canonical body frame), ``faces`` (M, 3)
-    and ``betas`` (the body it was made for); a relative path is relative to the config
-    file's folder. It is worn by every body of ``bodies`` (carried onto each shape by
+    garment: str | tuple[str, ...] | None = None
+    """A garment of the user's own instead of the generated T-shirts, or a list of them (all
+    of one category): each a ``.npz`` with ``vertices`` (N, 3) [m] (worn by the rest body,
+    canonical body frame), ``faces`` (M, 3), ``betas`` (the body it was made for) and
+    optionally ``category`` (default ``tshirt``); a relative path is relative to the config
+    file's folder. Each is worn by every body of ``bodies`` (carried onto each shape by
     :func:`~cloth_usd.core.transfer.transfer_garment`) and by its own body, named
     ``own``; ``shirts``, ``seed``, ``garment_vertices`` and ``test_shirts`` do not apply
     (there is no unseen garment). Written by ``cloth-usd train-garment``."""
@@ -110,7 +112,13 @@ def load_config(path: str | Path, *, mocap_dir: str | Path | None = None) -> Fac
         if key in raw:
             raw[key] = tuple(raw[key])
     if raw.get("garment"):
-        raw["garment"] = str(path.parent / raw["garment"])
+        files = raw["garment"]
+        if isinstance(files, str):
+            raw["garment"] = str(path.parent / files)
+        elif isinstance(files, list) and all(isinstance(f, str) for f in files):
+            raw["garment"] = tuple(str(path.parent / f) for f in files)
+        else:
+            raise ArgumentError(f"{path}: garment must be a file name or a list of them, got {files!r}")
     if mocap_dir is not None:
         raw["mocap_dir"] = str(mocap_dir)
     elif raw.get("mocap_dir"):
@@ -184,10 +192,15 @@ def _shirt_label(params) -> str:
 def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     """Every sequence of the data set, each tagged with its split in ``meta``."""
     body = body if body is not None else load_body_model()
-    own = load_own_garment(config.garment) if config.garment else None
+    owns = [load_own_garment(f) for f in own_garment_files(config)]
+    categories = sorted({g.category for g in owns})
+    if len(categories) > 1:
+        raise ArgumentError(f"garment: the garments are of several categories ({', '.join(categories)}); a data set "
+                            "trains one category")
+    own = owns[0] if owns else None
     if own is not None:
         config = dataclasses.replace(config, test_shirts=())
-        variants = [None]
+        variants = [None] * len(owns)
     else:
         variants = tshirt_variants(config.shirts, seed=config.seed)
         if config.garment_vertices:
@@ -200,9 +213,7 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     if bad:
         raise ArgumentError(f"simulate_splits {bad}: unknown (valid: {', '.join(splits)})")
     shapes = {s.name: s for s in body_shapes([b for b in config.bodies if b != OWN_BODY])}
-    if own is not None:
-        shapes[OWN_BODY] = BodyShape(OWN_BODY, own.betas)
-    elif OWN_BODY in config.bodies:
+    if own is None and OWN_BODY in config.bodies:
         raise ArgumentError(f"bodies: {OWN_BODY!r} is the body of the config's own garment, and it names none")
     body_shapes([b for b in config.test_bodies if b != OWN_BODY])  # validates the names
     train_shirts = [i for i in range(len(variants)) if i not in config.test_shirts]
@@ -227,22 +238,25 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
         if config.test_shirts and config.test_bodies else []
     garments: dict[tuple[int, str], tuple[np.ndarray, np.ndarray]] = {}
     jobs = []
+    files = own_garment_files(config)
     for split, s, b, motion in plan:
+        betas = owns[s].betas if b == OWN_BODY else shapes[b].betas
         if (s, b) not in garments:
-            garments[(s, b)] = make_tshirt(body, shapes[b].betas, variants[s]) if own is None else \
-                (transfer_garment(body, own.vertices, own.betas, shapes[b].betas), own.faces)
+            garments[(s, b)] = make_tshirt(body, betas, variants[s]) if own is None else \
+                (transfer_garment(body, owns[s].vertices, owns[s].betas, betas), owns[s].faces)
         verts, faces = garments[(s, b)]
-        params = {"file": Path(config.garment).name} if own is not None else dataclasses.asdict(variants[s])
+        params = {"file": Path(files[s]).name} if own is not None else dataclasses.asdict(variants[s])
         meta = {"split": split, "shirt": s, "shirt_params": params,
                 "shirt_label": "own" if own is not None else _shirt_label(variants[s]), "body": b,
-                "body_label": _body_label(shapes[b].betas), "motion": motion.name, "fps": motion.fps}
+                "body_label": _body_label(betas), "motion": motion.name, "fps": motion.fps,
+                "category": own.category if own is not None else "tshirt"}
         if motion.warmup_frames:
             meta["warmup_frames"] = motion.warmup_frames
         if motion.source is not None:
             meta["motion_source"] = motion.source
         jobs.append(Job(
             name=f"{split}.shirt{s}.{b}.{motion.name}", garment_vertices=verts, garment_faces=faces,
-            betas=shapes[b].betas, poses=motion.poses, transl=motion.transl, seed=config.seed, meta=meta))
+            betas=betas, poses=motion.poses, transl=motion.transl, seed=config.seed, meta=meta))
     if config.floor is not None:
         spec = FloorSpec.from_mapping(config.floor)
         simulated = [j for j in jobs if config.simulate_splits is None or j.meta["split"] in config.simulate_splits]
@@ -252,6 +266,13 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
 
 #: The body name of a config's own garment (:attr:`FactoryConfig.garment`): the body it was made for.
 OWN_BODY = "own"
+
+
+def own_garment_files(config: FactoryConfig) -> tuple[str, ...]:
+    """The files of :attr:`FactoryConfig.garment`, in order (none: the generated T-shirts)."""
+    if not config.garment:
+        return ()
+    return (config.garment,) if isinstance(config.garment, (str, Path)) else tuple(config.garment)
 
 
 @dataclass(frozen=True)
@@ -264,16 +285,19 @@ class OwnGarment:
     """(M, 3) int64 triangles."""
     betas: np.ndarray
     """(10,) float64 the shape of the body it was made for."""
+    category: str = "tshirt"
+    """The garment's category (a :class:`~cloth_usd.core.scene.Category` value)."""
 
 
-def save_own_garment(path: str | Path, vertices: np.ndarray, faces: np.ndarray, betas: np.ndarray) -> Path:
+def save_own_garment(path: str | Path, vertices: np.ndarray, faces: np.ndarray, betas: np.ndarray, *,
+                     category: str = "tshirt") -> Path:
     """Write the ``.npz`` :attr:`FactoryConfig.garment` reads (no pickle)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     b = np.zeros(10)
     b[:min(10, len(betas))] = np.asarray(betas, dtype=np.float64)[:10]
     np.savez(path, vertices=np.asarray(vertices, dtype=np.float64), faces=np.asarray(faces, dtype=np.int64),
-             betas=b)
+             betas=b, category=np.array(Category(category).value))
     return path
 
 
@@ -282,14 +306,20 @@ def load_own_garment(path: str | Path) -> OwnGarment:
     try:
         with np.load(path, allow_pickle=False) as z:
             v, f, b = (np.asarray(z[k]) for k in ("vertices", "faces", "betas"))
+            category = str(z["category"]) if "category" in z.files else Category.TSHIRT.value
     except (OSError, KeyError, ValueError) as exc:
         raise ArgumentError(f"garment {path}: unreadable ({exc}); it needs vertices, faces and betas") from None
     if v.ndim != 2 or v.shape[1] != 3 or not np.all(np.isfinite(v)) or f.ndim != 2 or f.shape[1] != 3 \
             or f.size == 0 or f.min() < 0 or f.max() >= v.shape[0]:
         raise ArgumentError(f"garment {path}: vertices must be finite (N, 3) and faces (M, 3) indices below N")
+    try:
+        category = Category(category).value
+    except ValueError:
+        valid = ", ".join(c.value for c in Category)
+        raise ArgumentError(f"garment {path}: category {category!r} is unknown (valid: {valid})") from None
     betas = np.zeros(10)
     betas[:min(10, b.size)] = b.ravel()[:10]
-    return OwnGarment(vertices=v.astype(np.float64), faces=f.astype(np.int64), betas=betas)
+    return OwnGarment(vertices=v.astype(np.float64), faces=f.astype(np.int64), betas=betas, category=category)
 
 
 def _worker(args: tuple) -> None:

@@ -40,6 +40,7 @@ from ..core.pipeline import (
     pose_body,
     prepare_pair,
 )
+from ..core.scene import Category
 from ..errors import ArgumentError
 
 __all__ = ["Split", "TEST_SPLITS", "Clip", "DataSet", "load_dataset", "CoarseTarget", "with_coarse_target", "with_heading",
@@ -174,9 +175,10 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
             raise ArgumentError(str(exc)) from exc
         rest = shard.garment_vertices.astype(np.float64)
         key = _pair_key(rest, shard.garment_faces, shard.betas)
-        if key not in pairs:
-            pairs[key] = prepare_pair(body, shard.betas, rest, shard.garment_faces, fit)
         meta = dict(entry.get("meta", {}))
+        if key not in pairs:
+            pairs[key] = prepare_pair(body, shard.betas, rest, shard.garment_faces, fit,
+                                      category=meta.get("category", Category.TSHIRT.value))
         w = warmup_frames(meta)  # the ease-in of a real clip: the garment still catching up
         t = shard.positions.shape[0] if max_frames is None else min(w + max_frames, shard.positions.shape[0])
         if w >= t:

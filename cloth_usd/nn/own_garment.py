@@ -1,11 +1,14 @@
-"""A model bundle for one garment of the user's own, from its mesh alone (``cloth-usd train-garment``).
+"""A model bundle for a garment of the user's own, or for several of one category, from
+their meshes alone (``cloth-usd train-garment``).
 
-The garment (its rest points as worn, triangles, and the betas of the body it was made
-for) is written into a work folder beside a data set config that names it
-(:attr:`~cloth_usd.datagen.factory.FactoryConfig.garment`): it is worn by its own body
+Each garment (its rest points as worn, triangles, the betas of the body it was made for,
+and its category) is written into a work folder beside a data set config that names them
+(:attr:`~cloth_usd.datagen.factory.FactoryConfig.garment`): each is worn by its own body
 and carried onto four more shapes across the shape space (slim, broad, short and fat,
-tall and thin), the five training pairs the fit attribute needs. The motions are the
-seven procedural ones, plus any the user lists (real clips among them, with a mocap
+tall and thin), the five training pairs per garment the fit attribute needs. A dress is
+bound as a bake binds it (:func:`~cloth_usd.core.skinning.bind_worn`: the skirt's loose
+vertices take blended weights), so the models learn on the skinned garment a bake starts from.
+The motions are the seven procedural ones, plus any the user lists (real clips among them, with a mocap
 folder). Then the coarse model and the detail model are trained on the garment's own
 physics (:func:`~cloth_usd.nn.physics_train.train_physics`: no simulation), and both are
 exported and verified as a bundle (:func:`~cloth_usd.nn.export.export_bundle`). The work
@@ -21,13 +24,16 @@ import shutil
 import time
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import numpy as np
 
 from ..core.body import BodyModel, load_body_model
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError
+
+if TYPE_CHECKING:
+    from ..datagen.factory import OwnGarment
 
 __all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "TRAIN_BODIES", "train_own_garment"]
 
@@ -46,6 +52,7 @@ PROCEDURAL_MOTIONS = tuple({"kind": k, "seconds": 1.0, "fps": 30, "seed": i, "bl
 TEST_MOTIONS = ({"kind": "dance", "seconds": 2.0, "fps": 30, "seed": 100, "blend_seconds": 0.25},
                 {"kind": "walk", "seconds": 2.0, "fps": 30, "seed": 101, "blend_seconds": 0.25})
 DATA_CONFIG = "data.json"
+#: The garments in the work folder: ``garment.npz``, then ``garment1.npz``, ``garment2.npz``, ...
 GARMENT_FILE = "garment.npz"
 
 
@@ -101,25 +108,33 @@ def _write_json(path: Path, data: dict) -> None:
     path.write_text(json.dumps(data, indent=1) + "\n")
 
 
+def _described(garments: Sequence[OwnGarment]) -> str:
+    sizes = ", ".join(str(np.asarray(g.vertices).shape[0]) for g in garments)
+    return f"{len(garments)} {Category(garments[0].category).value} garment(s) ({sizes} vertices)"
+
+
 def _best(result) -> tuple[float, float]:
     return float(result.best.val_loss), float(result.best.val_mm)
 
 
-def train_own_garment(vertices: np.ndarray, faces: np.ndarray, betas: np.ndarray, out_dir: str | Path, *,
-                      name: str, category: Category | str = Category.TSHIRT, work_dir: str | Path | None = None,
+def _garment_file(i: int) -> str:
+    return GARMENT_FILE if i == 0 else GARMENT_FILE.replace(".npz", f"{i}.npz")
+
+
+def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
+                      name: str, work_dir: str | Path | None = None,
                       motions: tuple[dict, ...] = (), mocap_dir: str | Path | None = None,
                       plan: OwnGarmentPlan = OwnGarmentPlan(), force: bool = False, device: str | None = "auto",
                       body: BodyModel | None = None,
                       progress: Callable[[str, object], None] | None = None) -> OwnGarmentResult:
-    """Train and export a bundle for one garment from its mesh (see the module docstring).
+    """Train and export a bundle for garments of one category from their meshes (see the
+    module docstring).
 
     Args:
-        vertices: (N, 3) float garment rest points [m], canonical body frame of ``betas``.
-        faces: (M, 3) int triangles.
-        betas: (B,) the shape of the body it was made for.
+        garments: the garments (rest points in the canonical frame of the body they were
+            made for, triangles, betas and category), all of one category: the bundle's.
         out_dir: the bundle folder to write.
         name: the bundle's name (recorded in every cache it bakes).
-        category: the garment's category (the bundle's).
         work_dir: where the config and the runs go (default: ``<out_dir>.work``).
         motions: extra training motions, entries as a data set config's ``train_motions``.
         mocap_dir: the folder their ``bvh`` entries are relative to.
@@ -127,13 +142,20 @@ def train_own_garment(vertices: np.ndarray, faces: np.ndarray, betas: np.ndarray
         force: replace an existing bundle, and runs this command left in ``work_dir``.
         progress: called with ``(tier, EpochRecord)`` after every epoch.
     Raises:
-        ArgumentError: an existing bundle or work folder without ``force``, or a bad motion.
+        ArgumentError: an existing bundle or work folder without ``force``, no garment, garments
+            of several categories, or a bad motion.
     """
     from ..datagen.factory import save_own_garment
     from .export import export_bundle
     from .physics_train import load_physics_config, train_physics
 
-    category = Category(category)
+    if not garments:
+        raise ArgumentError("train-garment: no garment given")
+    categories = sorted({Category(g.category).value for g in garments})
+    if len(categories) > 1:
+        raise ArgumentError(f"train-garment: the garments are of several categories ({', '.join(categories)}); "
+                            "a bundle serves one category")
+    category = Category(categories[0])
     out_dir = Path(out_dir)
     work = Path(work_dir) if work_dir is not None else out_dir.with_name(out_dir.name + ".work")
     if out_dir.exists() and any(out_dir.iterdir()) and not force:
@@ -149,8 +171,10 @@ def train_own_garment(vertices: np.ndarray, faces: np.ndarray, betas: np.ndarray
             shutil.rmtree(run)
     work.mkdir(parents=True, exist_ok=True)
     body = body if body is not None else load_body_model()
-    save_own_garment(work / GARMENT_FILE, vertices, faces, betas)
-    data = {"garment": GARMENT_FILE, "bodies": ["own", *TRAIN_BODIES, VAL_BODY], "test_bodies": [VAL_BODY],
+    files = [_garment_file(i) for i in range(len(garments))]
+    for f, g in zip(files, garments):
+        save_own_garment(work / f, g.vertices, g.faces, g.betas, category=category.value)
+    data = {"garment": files[0] if len(files) == 1 else files, "bodies": ["own", *TRAIN_BODIES, VAL_BODY], "test_bodies": [VAL_BODY],
             "test_body_shirts": 1, "sim": {"fps": 30}, "train_motions": [*PROCEDURAL_MOTIONS, *motions],
             "test_motions": list(TEST_MOTIONS)}
     _write_json(work / DATA_CONFIG, data)
@@ -170,8 +194,8 @@ def train_own_garment(vertices: np.ndarray, faces: np.ndarray, betas: np.ndarray
         seconds[tier] = time.perf_counter() - t0
     t0 = time.perf_counter()
     export_bundle(runs["coarse"], runs["detail"], work / DATA_CONFIG, out_dir, name=name, category=category.value,
-                  description=f"{name}: one garment ({np.asarray(vertices).shape[0]} vertices) trained on its "
-                              "physics by cloth-usd train-garment", force=force, body=body, mocap_dir=mocap_dir)
+                  description=f"{name}: {_described(garments)} trained on their physics by cloth-usd "
+                              "train-garment", force=force, body=body, mocap_dir=mocap_dir)
     seconds["export"] = time.perf_counter() - t0
     seconds["total"] = time.perf_counter() - began
     _write_json(work / "timing.json", {k: round(v, 1) for k, v in seconds.items()})

@@ -73,7 +73,7 @@ from ..core.fit import FitModel
 from ..core.heading import Heading, heading_frame
 from ..core.pipeline import (CoarseBase, GarmentPair, coarse_base_points, coarse_model_features, detail_model_inputs,
                              pose_body, prepare_pair)
-from ..core.scene import Tier
+from ..core.scene import Category, Tier
 from ..errors import ArgumentError, ClothUsdError
 from .data import CoarseTarget, Moments, Split, even_frames, plan_batches
 from .physics import GarmentRest, Material, contact_normal_force, friction_energy, garment_energy, garment_rest
@@ -289,7 +289,8 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
             continue
         key = f"shirt{job.meta['shirt']}.{job.meta['body']}"
         if key not in pairs:
-            pair = prepare_pair(body, job.betas, job.garment_vertices, job.garment_faces, fit)
+            pair = prepare_pair(body, job.betas, job.garment_vertices, job.garment_faces, fit,
+                                category=job.meta.get("category", Category.TSHIRT.value))
             pairs[key] = pair, garment_rest(job.garment_vertices, job.garment_faces, material)
         pair, rest = pairs[key]
         poses, transl = job.poses[:max_frames], job.transl[:max_frames]
@@ -430,7 +431,7 @@ class _Tier:
         posed = pose_body(self.body, clip.pair, poses, transl)
         feats = coarse_model_features(clip.pair, posed, transl)
         base = coarse_base_points(self.body, clip.pair, posed, poses, transl, self.base)
-        cloud = np.unique(clip.pair.patch.assoc)
+        cloud = clip.pair.patch.contact
         contact = (posed.garment_points, posed.garment_normals, posed.patch_points[:, cloud],
                    posed.patch_normals[:, cloud])
         if self.tier is Tier.COARSE:

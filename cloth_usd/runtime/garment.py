@@ -17,7 +17,7 @@ import numpy as np
 from ..core.body import BodyModel
 from ..core.graph import MeshGraph
 from ..core.pipeline import GarmentPair, prepare_pair, run_tiers
-from ..core.postprocess import DEFAULT_MARGIN
+from ..core.postprocess import garment_margin
 from ..core.scene import Tier
 from ..core.skinning import SkinBinding
 from ..core.smpl import NUM_JOINTS
@@ -48,21 +48,24 @@ class LearnedGarment:
         rest_points: (N, 3) garment rest points [m], canonical body frame (zero pose,
             no translation).
         faces: (M, 3) int garment triangles.
-        binding: a skinning binding of the same pair to reuse (made here if None).
-        margin: the post-process clearance [m].
+        binding: a skinning binding of the same pair to reuse (made here if None, as the
+            bundle's category binds).
+        margin: the post-process clearance [m]; None: the garment's own
+            (:func:`~cloth_usd.core.postprocess.garment_margin`: 2 mm, more for a coarse mesh).
     """
 
     def __init__(self, bundle: ModelBundle, body: BodyModel, betas: np.ndarray, rest_points: np.ndarray,
                  faces: np.ndarray, *, binding: SkinBinding | None = None,
-                 margin: float = DEFAULT_MARGIN) -> None:
+                 margin: float | None = None) -> None:
         self.bundle = bundle
         self.body = body
-        self.margin = float(margin)
+        self.margin = float(margin) if margin is not None else garment_margin(rest_points, faces)
         fit = bundle.fit
         if fit.anchors.size and int(fit.anchors.max()) >= body.num_vertices:
             raise BundleError(f"{bundle.path}: the fit model's anchors index body vertices up to "
                               f"{int(fit.anchors.max())}, but the body model has {body.num_vertices}")
-        self.pair: GarmentPair = prepare_pair(body, betas, rest_points, faces, fit, binding=binding)
+        self.pair: GarmentPair = prepare_pair(body, betas, rest_points, faces, fit, binding=binding,
+                                               category=bundle.category)
         """The pair's association, graph and fit attribute (:mod:`cloth_usd.core.pipeline`)."""
         self.betas = self.pair.betas
         self.faces = self.pair.faces

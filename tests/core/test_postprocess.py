@@ -40,3 +40,44 @@ def test_tilted_normal_and_zero_normal():
         push_out(pts[0], body[0], normals[0])
     with pytest.raises(ArgumentError, match="margin"):
         push_out(pts, body, normals, margin=-1.0)
+
+
+def test_a_vertex_is_measured_against_the_body_vertex_nearest_to_it_in_its_frame():
+    """A vertex bound at rest to one body vertex but now inside another part of the body
+    (a skirt swung into the other thigh) is pushed out of the part it is in."""
+    from cloth_usd.core.postprocess import nearest_body_points
+
+    cloud = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]])  # (T=1, K=2, 3)
+    normals = np.array([[[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]])
+    points = np.array([[[0.95, 0.0, 0.0], [0.1, 0.5, 0.0]]])  # inside the second; well off the first
+    b, n = nearest_body_points(points, cloud, normals)
+    np.testing.assert_array_equal(b[0], cloud[0, [1, 0]])
+    np.testing.assert_array_equal(n[0], normals[0, [1, 0]])
+    out, moved = push_out(points, b, n, margin=0.002)
+    np.testing.assert_allclose(out[0, 0], [1.002, 0.0, 0.0], atol=1e-12)
+    np.testing.assert_array_equal(out[0, 1], points[0, 1])
+    assert moved.tolist() == [1]
+    # against the vertex it was bound to (the first), it only moved along that one's normal: still inside
+    bound, _ = push_out(points, np.broadcast_to(cloud[:, :1], points.shape), np.broadcast_to(normals[:, :1], points.shape))
+    assert bound[0, 0, 0] == points[0, 0, 0] < 1.0
+    with pytest.raises(ArgumentError):
+        nearest_body_points(points, cloud[:, :0], normals[:, :0])
+
+
+def test_a_coarse_garment_keeps_more_clearance_than_a_fine_one():
+    from cloth_usd.core.postprocess import DEFAULT_MARGIN, LIMB_RADIUS, garment_margin
+
+    def grid(spacing):
+        xs = np.arange(6) * spacing
+        pts = np.array([[x, y, 0.0] for y in xs for x in xs])
+        faces = np.array([f for j in range(5) for i in range(5)
+                          for f in ((6 * j + i, 6 * j + i + 1, 6 * j + i + 6), (6 * j + i + 1, 6 * j + i + 7, 6 * j + i + 6))])
+        return pts, faces
+
+    assert garment_margin(*grid(0.015)) == DEFAULT_MARGIN  # a 4000-vertex shirt's edges: the sagitta is 0.6 mm
+    coarse = garment_margin(*grid(0.04))
+    assert coarse > 0.004
+    # the chord bulge of a 4.5 cm limb between two vertices pushed out by that margin stays under the mesh
+    half = 0.02
+    bulge = LIMB_RADIUS - np.sqrt(LIMB_RADIUS ** 2 - half ** 2)
+    assert coarse == pytest.approx(bulge, rel=1e-9)

@@ -106,3 +106,25 @@ def test_a_skirt_between_the_legs_follows_both_legs_with_free_beyond():
     assert worst_stretch(blended) < 0.7 * worst_stretch(nearest), (worst_stretch(blended), worst_stretch(nearest))
     with pytest.raises(Exception, match="free_beyond needs the garment's faces"):
         bind_garment(body, betas, rest, free_beyond=0.01)
+
+
+def test_dresses_and_trousers_bind_with_blended_weights_everything_else_with_the_nearest():
+    """bind_worn is the one place that decides, for the bake and for training alike."""
+    from cloth_usd.core.scene import Category
+    from cloth_usd.core.skinning import LOWER_FREE_BEYOND, bind_worn
+
+    body = _body()
+    betas = np.zeros(body.num_betas)
+    v, _ = shape_body(body, betas)
+    # a small sheet: two vertices on the body, two standing off it by 5 cm
+    normal_off = np.array([0.0, 0.0, 0.05])
+    rest = np.vstack([v[0], v[1], v[0] + normal_off, v[1] + normal_off])
+    faces = np.array([[0, 1, 2], [1, 3, 2]])
+    for category in Category:
+        got = bind_worn(body, betas, rest, faces, category)
+        free = LOWER_FREE_BEYOND if category in (Category.DRESS, Category.TROUSERS) else None
+        want = bind_garment(body, betas, rest, faces=faces, free_beyond=free)
+        np.testing.assert_allclose(got.weights, want.weights, atol=1e-12, err_msg=category.value)
+    nearest = bind_garment(body, betas, rest)
+    assert not np.allclose(bind_worn(body, betas, rest, faces, "trousers").weights, nearest.weights)
+    np.testing.assert_allclose(bind_worn(body, betas, rest, faces, "tshirt").weights, nearest.weights, atol=1e-12)

@@ -97,3 +97,49 @@ def test_train_garment_makes_a_bundle_that_bakes_the_sample(tmp_path, capsys):
     assert "bundle mine" in capsys.readouterr().err + capsys.readouterr().out or (tmp_path / "c.usdc").is_file()
     # a second call refuses to replace the runs and the bundle, unless forced
     assert main(["train-garment", str(SAMPLE), "-o", str(out)]) == 2
+
+
+def test_several_garments_each_worn_by_every_body_and_by_their_own(tmp_path):
+    body = load_body_model()
+    made = []
+    for i, betas in enumerate((np.r_[1.0, 1.0, np.zeros(8)], np.r_[-1.0, 0.5, np.zeros(8)])):
+        verts, faces = make_tshirt(body, betas, TShirtParams(target_vertices=200 + 100 * i))
+        save_own_garment(tmp_path / f"g{i}.npz", verts, faces, betas, category="dress")
+        made.append((verts, faces, betas))
+    (tmp_path / "data.json").write_text(json.dumps({
+        "garment": ["g0.npz", "g1.npz"], "bodies": [OWN_BODY, "slim", "medium_thin"], "test_bodies": ["medium_thin"],
+        "max_frames": 2, "train_motions": [{"kind": "walk", "seconds": 1.0, "seed": 0}],
+        "test_motions": [{"kind": "dance", "seconds": 1.0, "seed": 5}]}))
+    jobs = plan_jobs(load_config(tmp_path / "data.json"), body)
+    train = [j for j in jobs if j.meta["split"] == "train"]
+    assert {(j.meta["shirt"], j.meta["body"]) for j in train} == {(0, OWN_BODY), (0, "slim"), (1, OWN_BODY), (1, "slim")}
+    for job in jobs:
+        verts, faces, betas = made[job.meta["shirt"]]
+        np.testing.assert_array_equal(job.garment_faces, faces)
+        assert job.meta["category"] == "dress" and job.meta["shirt_params"] == {"file": f"g{job.meta['shirt']}.npz"}
+        if job.meta["body"] == OWN_BODY:  # each garment on the body it was made for
+            np.testing.assert_allclose(job.betas, betas)
+            np.testing.assert_allclose(job.garment_vertices, verts, atol=1e-12)
+
+
+def test_garments_of_two_categories_are_refused_naming_them(tmp_path):
+    body = load_body_model()
+    verts, faces = make_tshirt(body, np.zeros(10), TShirtParams(target_vertices=200))
+    save_own_garment(tmp_path / "a.npz", verts, faces, np.zeros(10), category="dress")
+    save_own_garment(tmp_path / "b.npz", verts, faces, np.zeros(10), category="trousers")
+    (tmp_path / "c.json").write_text(json.dumps({"garment": ["a.npz", "b.npz"], "bodies": [OWN_BODY, "slim"],
+                                                 "test_bodies": []}))
+    with pytest.raises(ArgumentError, match="dress, trousers"):
+        plan_jobs(load_config(tmp_path / "c.json"), body)
+    (tmp_path / "d.json").write_text(json.dumps({"garment": 3}))
+    with pytest.raises(ArgumentError, match="garment must be"):
+        load_config(tmp_path / "d.json")
+
+
+def test_train_garment_refuses_stages_whose_garments_differ_in_category(tmp_path, capsys):
+    from cloth_usd.cli import main
+
+    dress = Path(__file__).resolve().parents[2] / "samples" / "walk_dress" / "dress.usda"
+    assert main(["train-garment", str(dress), str(SAMPLE), "-o", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert "tshirt" in err and "dress" in err and "one category" in err and not (tmp_path / "b").exists()
