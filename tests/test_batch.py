@@ -282,7 +282,7 @@ def test_a_worker_cache_loads_each_model_once_and_binds_each_garment_once(shots,
 
     monkeypatch.setattr(baking_cache, "load_body_model", counting("body", baking_cache.load_body_model))
     monkeypatch.setattr(bundles, "load_bundle", counting("bundle", bundles.load_bundle))
-    monkeypatch.setattr(baking_garment, "bind_garment", counting("bind", baking_garment.bind_garment))
+    monkeypatch.setattr(baking_garment, "bind_worn", counting("bind", baking_garment.bind_worn))
     models = fake_bundle(tmp_path / "fake", 0.005)
     cache = ModelCache()
     for i, frames in enumerate(["1:4", "5:8", "9:12"]):

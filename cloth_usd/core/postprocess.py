@@ -72,8 +72,11 @@ def nearest_body_points(points: np.ndarray, body_points: np.ndarray,
     if p.ndim != 3 or b.ndim != 3 or b.shape != n.shape or b.shape[0] != p.shape[0] or b.shape[1] == 0:
         raise ArgumentError(f"points (T, N, 3), body_points and body_normals (T, K, 3) with K > 0 expected, got "
                             f"{p.shape}, {b.shape}, {n.shape}")
-    index = np.stack([cKDTree(b[t]).query(p[t])[1] for t in range(p.shape[0])]) if p.shape[1] else \
-        np.zeros((p.shape[0], 0), dtype=np.int64)
+    index = np.zeros(p.shape[:2], dtype=np.int64)
+    for t in range(p.shape[0]):
+        finite = np.isfinite(p[t]).all(axis=1)  # a non-finite vertex stays so (the guard catches it)
+        if finite.any():
+            index[t, finite] = cKDTree(b[t]).query(p[t, finite])[1]
     rows = np.arange(p.shape[0])[:, None]
     return b[rows, index], n[rows, index]
 

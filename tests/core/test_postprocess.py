@@ -81,3 +81,15 @@ def test_a_coarse_garment_keeps_more_clearance_than_a_fine_one():
     half = 0.02
     bulge = LIMB_RADIUS - np.sqrt(LIMB_RADIUS ** 2 - half ** 2)
     assert coarse == pytest.approx(bulge, rel=1e-9)
+
+
+def test_a_non_finite_vertex_is_left_for_the_guard():
+    from cloth_usd.core.postprocess import nearest_body_points
+
+    cloud = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]])
+    normals = np.array([[[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]])
+    points = np.array([[[np.nan, 0.0, 0.0], [0.95, 0.0, 0.0]]])
+    b, n = nearest_body_points(points, cloud, normals)
+    np.testing.assert_array_equal(b[0, 1], cloud[0, 1])
+    out, _ = push_out(points, b, n)
+    assert np.isnan(out[0, 0]).any() and np.isfinite(out[0, 1]).all()
