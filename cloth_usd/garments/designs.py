@@ -26,6 +26,8 @@ __all__ = ["TShirtDesign", "DressDesign", "TrousersDesign", "DESIGNS", "PRESETS"
 _FRONT_AXES = np.array([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
 #: Gap [m] between the body and a placed panel.
 _CLEARANCE = 0.035
+#: The least ease [m] of a trouser leg's girth over the calf.
+_CALF_EASE = 0.04
 #: Extra half width [m] of a back trouser panel at the hips and thigh, for the seat.
 _SEAT = 0.02
 #: How far the shoulder line of a front or back panel is raised above the body's shoulder [m].
@@ -329,13 +331,27 @@ def _trousers(m: BodyMeasurements, d: TrousersDesign) -> Pattern:
     outer_hem = np.array([inner_hem[0] + hem_half, hem_y])
     crotch_pt = np.array([gap, crotch])
 
+    # Below the knee the leg narrows to the hem, but not inside the calf: no panel narrower
+    # there than half the leg's girth and the ease (the slim cut's calves stretched to 1.10x).
+    calf_y = [m.ankle_y + 0.04, min(m.calf_y, m.knee_y - 1e-3), m.knee_y]
+    calf_girth = [m.ankle_girth, m.calf_girth, m.knee_girth]
+
+    def over_calf(outseam: np.ndarray) -> np.ndarray:
+        y = outseam[:, 1]
+        below_knee = (y <= m.knee_y) & (y > hem_y)
+        ease = np.interp(y, [hem_y, max(m.calf_y, hem_y + 1e-3)], [min(d.hem_ease, _CALF_EASE), _CALF_EASE])
+        need = inner_hem[0] + (np.interp(y, calf_y, calf_girth) + ease) / 2.0
+        out = outseam.copy()
+        out[below_knee, 0] = np.maximum(out[below_knee, 0], need[below_knee])
+        return out
+
     def leg(seat: float) -> list:
         """The leg panel's edges; ``seat``: extra half width [m] at the hips and thigh (a back
         panel covers the seat, which the front does not)."""
         outer_thigh = np.array([max(thigh_half + gap, hip_half) + seat, crotch])
         return [("hem", line(inner_hem, outer_hem)),
-                ("outseam", bezier(outer_hem, [outer_hem[0], 0.5 * (hem_y + crotch)], outer_thigh,
-                                   [hip_half + seat, m.hip_y], [top_half, top_y])),
+                ("outseam", over_calf(bezier(outer_hem, [outer_hem[0], 0.5 * (hem_y + crotch)], outer_thigh,
+                                             [hip_half + seat, m.hip_y], [top_half, top_y]))),
                 ("top", line([top_half, top_y], [gap, top_y])),
                 ("centre", line([gap, top_y], crotch_pt)),
                 ("inseam", bezier(crotch_pt, [inner_hem[0], crotch - 0.1], inner_hem))]
@@ -366,7 +382,8 @@ def _trousers(m: BodyMeasurements, d: TrousersDesign) -> Pattern:
                       Seam((f"band_{part}", "bottom_r"), (f"{part}_r", "top"))]
         seams += [Seam(("band_front", "side_l"), ("band_back", "side_l")),
                   Seam(("band_front", "side_r"), ("band_back", "side_r"))]
-    return Pattern("trousers", tuple(panels), tuple(seams))
+    held = ("band_front", "band_back") if d.waistband > 0 else ()
+    return Pattern("trousers", tuple(panels), tuple(seams), held=held)
 
 
 def draft(category: str, m: BodyMeasurements, design) -> Pattern:

@@ -53,6 +53,9 @@ class BodyMeasurements:
     knee_girth: float
     ankle_y: float
     ankle_girth: float
+    calf_y: float
+    """Height of the widest slice of the leg between the knee and the ankle."""
+    calf_girth: float
     arm_y: float
     """Height of the arm's axis in the T-pose (the shoulder joint)."""
     upper_arm_girth: float
@@ -125,6 +128,8 @@ def measure_body(body: BodyModel, betas: np.ndarray) -> BodyMeasurements:
         sel = (np.abs(y - h) < _SLAB) & (x > 0)
         return _perimeter(v[sel][:, [0, 2]])
 
+    lower = np.linspace(knee_y - 0.05, ankle_y + 0.08, 10)
+    calves = [leg(h) for h in lower]
     neck = v[(np.abs(y - (float(j[_NECK, 1]) + 0.02)) < _SLAB)]
     return BodyMeasurements(
         neck_y=float(j[_NECK, 1]), neck_girth=_perimeter(neck[:, [0, 2]]),
@@ -133,7 +138,8 @@ def measure_body(body: BodyModel, betas: np.ndarray) -> BodyMeasurements:
         waist_girth=_perimeter(torso_slice(waist_y, torso_half)),
         natural_waist_y=float(heights[int(np.argmin(waists))]), natural_waist_girth=min(waists), hip_y=hip_y, hip_girth=max(girths),
         crotch_y=crotch_y, thigh_girth=leg(crotch_y - 0.04), knee_y=knee_y, knee_girth=leg(knee_y),
-        ankle_y=ankle_y, ankle_girth=leg(ankle_y + 0.04), arm_y=arm_y, upper_arm_girth=upper_arm,
+        ankle_y=ankle_y, ankle_girth=leg(ankle_y + 0.04), calf_y=float(lower[int(np.argmax(calves))]),
+        calf_girth=max(calves), arm_y=arm_y, upper_arm_girth=upper_arm,
         elbow_x=float(j[_L_ELBOW, 0]), wrist_x=wrist_x, wrist_girth=_perimeter(wrist[:, 1:]),
         front_z=float(torso[:, 2].max()), back_z=float(torso[:, 2].min()),
         seat_front_z=float(seat[:, 2].max()), seat_back_z=float(seat[:, 2].min()))

@@ -97,6 +97,10 @@ class Pattern:
     category: str
     panels: tuple[Panel, ...]
     seams: tuple[Seam, ...]
+    held: tuple[str, ...] = ()
+    """Panels held where they were sewn while the garment drapes: a waistband, which holds
+    trousers at the waist (an elastic or a belt) where otherwise they slide down the body
+    until the band is stretched over the hips."""
 
     def panel(self, name: str) -> Panel:
         for p in self.panels:
@@ -125,6 +129,8 @@ class PatternMesh:
     conform: np.ndarray | None = None
     """(N,) int8: +1 / -1 a vertex of a panel placed on the body's front / back surface,
     0 a vertex of a flat-placed panel; None: all flat."""
+    held: tuple[str, ...] = ()
+    """The pattern's :attr:`Pattern.held` panels."""
 
 
 def _resample(edge: np.ndarray, segments: int) -> np.ndarray:
@@ -255,4 +261,5 @@ def triangulate_pattern(pattern: Pattern, spacing: float) -> PatternMesh:
                        panel_names=tuple(p.name for p in pattern.panels), spacing=float(spacing),
                        conform=np.concatenate([np.full(np.count_nonzero(np.concatenate(panel_of) == i),
                                                        int(p.outward) if p.conform else 0, dtype=np.int8)
-                                               for i, p in enumerate(pattern.panels)]))
+                                               for i, p in enumerate(pattern.panels)]),
+                       held=tuple(pattern.held))

@@ -27,6 +27,7 @@ import numpy as np
 from ..core.body import BodyModel, shape_body
 from ..datagen.simulate import (SimConfig, SimulationError, _import_engine, _vertex_normals, make_collider,
                                 resolve_device)
+from ..errors import ArgumentError
 from .pattern import PatternMesh
 
 __all__ = ["SewConfig", "SewnGarment", "merge_seams", "pattern_edge_lengths", "conform_placement", "sew"]
@@ -134,12 +135,14 @@ def _rest_frames(uv: np.ndarray, corner: np.ndarray) -> tuple[np.ndarray, np.nda
 def _simulate(newton, wp, device: str, points: np.ndarray, faces: np.ndarray, *, collider_points: np.ndarray,
               collider_faces: np.ndarray, frames: int, gravity: float, cfg: SimConfig,
               springs: np.ndarray | None = None, seam_stiffness: float = 0.0, seam_damping: float = 0.0,
-              rest: tuple[np.ndarray, np.ndarray, dict] | None = None) -> np.ndarray:
+              rest: tuple[np.ndarray, np.ndarray, dict] | None = None, held: np.ndarray | None = None) -> np.ndarray:
     """Simulate a cloth on a static body for ``frames`` frames; (K, 3) its last positions.
 
     Args:
         rest: ``(inverse rest bases (M, 2, 2), areas (M,), {sorted vertex pair: length})`` to
             replace the rest metric Newton derives from ``points``; None keeps it.
+        held: (K,) bool vertices that keep their place (zero mass: VBD leaves them still);
+            only with ``rest``, which sets the masses.
     """
     builder = newton.ModelBuilder(up_axis=newton.Axis.Y, gravity=(0.0, -gravity, 0.0))
     builder.add_cloth_mesh(vertices=[wp.vec3(*p) for p in points.astype(np.float32)],
@@ -158,6 +161,8 @@ def _simulate(newton, wp, device: str, points: np.ndarray, faces: np.ndarray, *,
         mass = np.zeros(len(points))
         for k in range(3):
             np.add.at(mass, faces[:, k], cfg.density * areas / 3.0)
+        if held is not None:
+            mass[held] = 0.0
         builder.particle_mass = mass.tolist()
         ends = np.sort(np.asarray(builder.edge_indices)[:, 2:4], axis=1)
         builder.edge_rest_length = [lengths.get((int(a), int(b)), float(np.linalg.norm(points[a] - points[b])))
@@ -316,8 +321,16 @@ def sew(body: BodyModel, betas: np.ndarray, mesh: PatternMesh, config: SewConfig
     inv_d, areas = _rest_frames(mesh.uv, corner)
     edges, lengths = pattern_edge_lengths(mesh.uv, faces, corner)
     rest = (inv_d, areas, {(int(a), int(b)): float(n) for (a, b), n in zip(edges, lengths)})
+    held = None
+    if mesh.held:  # a waistband, held where it was sewn while the rest hangs from it
+        unknown = sorted(set(mesh.held) - set(mesh.panel_names))
+        if unknown:
+            raise ArgumentError(f"pattern: held panels {unknown} are not among its panels "
+                                f"({', '.join(mesh.panel_names)})")
+        held = np.zeros(count, bool)
+        held[vertex_of[np.isin(np.asarray(mesh.panel_names)[mesh.panel], mesh.held)]] = True
     draped = _simulate(newton, wp, device, merged, faces, frames=config.drape_frames, gravity=cfg.gravity,
-                       rest=rest, **common)
+                       rest=rest, held=held, **common)
     stretch = np.linalg.norm(draped[edges[:, 0]] - draped[edges[:, 1]], axis=1) / np.maximum(lengths, 1e-12)
     seconds = time.perf_counter() - began
     log.info("sewn and draped in %.1f s: %d vertices, edge stretch p99 %.3f", seconds, count,

@@ -77,3 +77,22 @@ def test_made_garment_is_sewn_closed_and_drapes_to_its_pattern(tmp_path, capsys,
     assert counts.max() == 2  # seams merged into a manifold
     assert main(["inspect", str(out)]) == 0
     assert "warnings    0" in capsys.readouterr().out
+
+
+@pytest.mark.slow
+def test_trousers_hang_from_a_waistband_held_where_it_was_sewn():
+    """Unheld, the trousers slid 8-16 cm down the body while draping until the band was
+    stretched over the hips (p99 up to 1.11); held, the band stays and the legs hang from it."""
+    pytest.importorskip("newton")
+    from cloth_usd.core.body import load_body_model
+    from cloth_usd.garments.make import make_garment
+
+    made = make_garment("trousers", np.r_[1.0, 0.3, np.zeros(8)], body=load_body_model(), preset="wide",
+                        target_vertices=400)
+    assert made.pattern.held == ("band_front", "band_back") and made.mesh.held == made.pattern.held
+    band = np.isin(np.asarray(made.mesh.panel_names)[made.mesh.panel], made.mesh.held)
+    sewn_y = np.median(made.mesh.placed[band, 1])
+    draped_y = np.median(made.points[made.sewn.vertex_of[band], 1])
+    assert abs(draped_y - sewn_y) < 0.02, (sewn_y, draped_y)
+    legs = ~band
+    assert np.median(made.points[made.sewn.vertex_of[legs], 1]) < draped_y - 0.2  # the legs hang below it
