@@ -136,7 +136,9 @@ def _fit(args: argparse.Namespace) -> int:
     path = _write(args, body, betas, points=fitted.points, faces=faces, st=fitted.uv, st_indices=fitted.uv_indices,
                   key="garment_fit", report=report)
     sys.stdout.write(f"wrote {path}: {args.category} fitted by {report['method']} "
-                     f"({report['units_m']:g} m per unit, {report['up_axis']} up, arm pose {report['arm_pose']:g}), "
+                     f"({report['units_m']:g} m per unit, {report['up_axis']} up, "
+                     f"{'turned %g deg, ' % report['turned_deg'] if report.get('turned_deg') else ''}"
+                     f"arm pose {report['arm_pose']:g}), "
                      f"{report['vertices']} vertices, median {report['median_distance_mm']:.1f} mm from the body, "
                      f"{100 * report['inside_fraction']:.1f}% inside, {report['seconds']:.0f} s\n")
     return 0

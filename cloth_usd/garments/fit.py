@@ -8,8 +8,9 @@
    is placed by the binding on our body posed into MakeHuman's rest pose
    (:mod:`~cloth_usd.garments.mhclo`); its skinning weights are the body's at its bound
    points. Any other garment is aligned rigidly (translation, after the units) to our
-   body in each of a few arm poses from the T-pose to MakeHuman's A-pose, and the pose it
-   lies closest to wins; its skinning weights are the body's at each vertex's closest
+   body in each of a few arm poses from the T-pose to MakeHuman's A-pose and each quarter
+   turn about the up axis (a garment modelled facing another way than +Z), and the pose
+   and turn it lies closest to win; its skinning weights are the body's at each vertex's closest
    surface point, smoothed over the garment.
 3. **Unposed to the T-pose** through those weights (inverse linear blend skinning), moved
    out of the body (:func:`~cloth_usd.garments.sew.push_out`) and draped under gravity on
@@ -68,6 +69,13 @@ class FitConfig:
     first and the last of ``arm_poses`` is taken only if its alignment distance is this
     fraction smaller (a short sleeve hangs a little below the T-posed arm, which a slightly
     lowered arm matches as well)."""
+    turns: tuple[float, ...] = (0.0, 90.0, 180.0, 270.0)
+    """Turns about the up axis [deg] tried for a garment without a binding (0: it faces +Z,
+    as the body does)."""
+    turn_margin: float = 0.15
+    """A turn other than 0 is taken only if its alignment distance is this fraction smaller:
+    a garment's front and back look alike, so the file's own facing is trusted unless
+    another is clearly closer."""
     icp_iterations: int = 20
     """Translation updates of the rigid alignment."""
     weight_smoothing: int = 10
@@ -222,6 +230,13 @@ def _align(points: np.ndarray, category: str, posed: np.ndarray, faces: np.ndarr
     return best_shift, best
 
 
+def _turn_y(degrees: float) -> np.ndarray:
+    """(3, 3) the rotation by ``degrees`` about +Y (right-handed)."""
+    a = np.deg2rad(degrees)
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
+
+
 def _check_shape(src: SourceMesh, tri: np.ndarray) -> None:
     name = src.source or "the mesh"
     if src.num_vertices < 3 or not len(tri):
@@ -282,18 +297,20 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
         unit, units_from = _units(src, height)
         ups = [src.up_axis] if src.up_axis else ["Y", "Z"]
         best = None
+        poses = {frac: _pose(body, v_rest, joints, a_pose * frac) for frac in config.arm_poses}
+        ends = (config.arm_poses[0], config.arm_poses[-1])
         for up in ups:
-            pts = src.points * unit @ (_Z_UP.T if up == "Z" else np.eye(3))
-            for frac in config.arm_poses:
-                pose = a_pose * frac
-                posed = _pose(body, v_rest, joints, pose)
-                shift, score = _align(pts, category, posed, body.faces, joints, config.icp_iterations)
-                log.debug("up %s arm pose %.2f: mean distance %.1f mm", up, frac, score * 1e3)
-                ends = (config.arm_poses[0], config.arm_poses[-1])
-                ranked = score * (1.0 + config.in_between_margin) if frac not in ends else score
-                if best is None or ranked < best[0]:
-                    best = (ranked, score, up, frac, pts + shift, pose, posed)
-        _, score, up, frac, posed_points, pose, posed = best
+            upright = src.points * unit @ (_Z_UP.T if up == "Z" else np.eye(3))
+            for turn in config.turns:
+                pts = upright @ _turn_y(turn).T
+                for frac, posed in poses.items():
+                    shift, score = _align(pts, category, posed, body.faces, joints, config.icp_iterations)
+                    log.debug("up %s turn %g arm pose %.2f: mean distance %.1f mm", up, turn, frac, score * 1e3)
+                    ranked = score * (1.0 + config.in_between_margin) if frac not in ends else score
+                    ranked *= (1.0 + config.turn_margin) if turn % 360.0 else 1.0
+                    if best is None or ranked < best[0]:
+                        best = (ranked, score, up, turn, frac, pts + shift, a_pose * frac, posed)
+        _, score, up, turn, frac, posed_points, pose, posed = best
         a = associate(posed_points, posed, body.faces)
         weights = np.einsum("nk,nkj->nj", a.barycentric, body.weights[body.faces[a.triangle]])
         weights = _smooth_weights(weights, tri, config.weight_smoothing)
@@ -302,7 +319,8 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
             raise GarmentFitError(f"{src.source}: does not fit the body: after alignment its median vertex is "
                                   f"{median:.2f} m from the body's surface (at most {config.max_median_distance} m); "
                                   "is it a garment, and in the units its file says?")
-        report.update(method="shape", units_m=unit, units_from=units_from, up_axis=up, arm_pose=frac,
+        report.update(method="shape", units_m=unit, units_from=units_from, up_axis=up, turned_deg=float(turn),
+                      arm_pose=frac,
                       align_mean_mm=round(score * 1e3, 1), **({"mhclo_skipped": why_not} if mhclo is not None else {}))
     keep, dropped = _keep_pieces(posed_points, tri, category, joints)
     rest = _unpose(posed_points, weights, joints, pose, body.parents)
