@@ -106,8 +106,8 @@ class BodyPatch:
     """(N,) int64 each garment vertex's associated body vertex, indexing ``vertices``."""
     contact: np.ndarray
     """(V'',) int64 the body under the garment, indexing ``vertices``: the associated body
-    vertices and every body vertex within :data:`CONTACT_REACH` of the rest garment, each
-    once. The post-process (and the physics objective's nearest contact) looks here for the
+    vertices and every body vertex within :data:`CONTACT_REACH` of the rest garment, in the
+    T-pose or with the arms lowered (:func:`body_under`), each once. The post-process (and the physics objective's nearest contact) looks here for the
     body point nearest to a garment vertex; their normals are exact."""
 
 
@@ -135,17 +135,35 @@ def body_patch(body_faces: np.ndarray, assoc_vertex: np.ndarray, near: np.ndarra
 CONTACT_REACH = 0.05
 
 
-def body_under(v_shaped: np.ndarray, rest_points: np.ndarray, reach: float = CONTACT_REACH) -> np.ndarray:
-    """(R,) int64 the body vertices within ``reach`` [m] of a rest garment vertex.
+#: The arms lowered from the T-pose by this much [rad] (shoulders about +-Z): the pose in
+#: which the inner arms come against the garment's sides (:func:`body_under`).
+ARMS_DOWN = 1.35
+
+
+def body_under(v_shaped: np.ndarray, rest_points: np.ndarray, reach: float = CONTACT_REACH, *,
+               arms_down: np.ndarray | None = None) -> np.ndarray:
+    """(R,) int64 the body vertices within ``reach`` [m] of a rest garment vertex, in the
+    T-pose or, when given, with the arms lowered (the inner arms, which press into a
+    bodice's or a shirt's sides when they hang, are then the body under it too).
 
     Args:
         v_shaped: (V, 3) the unposed body [m]; rest_points: (N, 3) the rest garment [m].
+        arms_down: (V, 3) the same body with its arms lowered [m] (:data:`ARMS_DOWN`).
     """
     from scipy.spatial import cKDTree
 
-    d, _ = cKDTree(np.asarray(rest_points, dtype=np.float64)).query(np.asarray(v_shaped, dtype=np.float64),
-                                                                      distance_upper_bound=reach)
-    return np.flatnonzero(np.isfinite(d)).astype(np.int64)
+    tree = cKDTree(np.asarray(rest_points, dtype=np.float64))
+    near = np.isfinite(tree.query(np.asarray(v_shaped, dtype=np.float64), distance_upper_bound=reach)[0])
+    if arms_down is not None:
+        near |= np.isfinite(tree.query(np.asarray(arms_down, dtype=np.float64), distance_upper_bound=reach)[0])
+    return np.flatnonzero(near).astype(np.int64)
+
+
+def _arms_down(body: BodyModel, v_shaped: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """(V, 3) the shaped body with its arms lowered by :data:`ARMS_DOWN`."""
+    pose = np.zeros((1, 72))
+    pose[0, 3 * 16 + 2], pose[0, 3 * 17 + 2] = -ARMS_DOWN, ARMS_DOWN  # left and right shoulder
+    return lbs(body, v_shaped, joints, pose, np.zeros((1, 3)))[0][0]
 
 
 @dataclass(frozen=True)
@@ -188,7 +206,8 @@ def prepare_pair(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray, fa
     graph = build_graph(faces, rest_points)
     d = pair_distances(rest_points, binding.association, v_shaped, fit.anchors)
     alpha = np.asarray(fit.transform(d), dtype=np.float64)
-    patch = body_patch(body.faces, binding.association.vertex, body_under(v_shaped, rest_points))
+    patch = body_patch(body.faces, binding.association.vertex,
+                       body_under(v_shaped, rest_points, arms_down=_arms_down(body, v_shaped, joints)))
     return GarmentPair(betas=betas, faces=faces, binding=binding, v_shaped=v_shaped, joints=joints,
                        graph=graph, alpha=alpha, patch=patch)
 

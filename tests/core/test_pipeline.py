@@ -76,3 +76,22 @@ def test_coarse_base_adds_the_displacement_to_the_body_or_the_skinned_garment():
         np.testing.assert_array_equal(moved, expect_moved)
     with pytest.raises(ValueError):
         run_tiers(body, pair, poses, transl, zero, coarse_base="hips")
+
+
+def test_the_body_under_a_shirt_includes_the_inner_arms_that_hang_against_it():
+    """The post-process looks for the body under a garment among these vertices: a torso's
+    garment meets the upper arms only when they hang, so they count with the arms lowered."""
+    from cloth_usd.core.body import load_body_model, shape_body
+    from cloth_usd.core.pipeline import _arms_down, body_under
+
+    body = load_body_model()
+    v, joints = shape_body(body, np.zeros(10))
+    owner = np.argmax(body.weights, axis=1)
+    torso = np.isin(owner, [3, 6, 9])  # spine1..3
+    rest = v[torso] * [1.03, 1.0, 1.03]  # a shirt standing a little off the torso
+    upper_arm = np.isin(owner, [16, 17])
+    t_pose = body_under(v, rest)
+    lowered = body_under(v, rest, arms_down=_arms_down(body, v, joints))
+    assert set(t_pose) <= set(lowered)
+    assert upper_arm[t_pose].sum() < upper_arm[lowered].sum()
+    assert upper_arm[lowered].sum() > 0.1 * upper_arm.sum()
