@@ -49,7 +49,7 @@ def test_a_vertex_is_measured_against_the_body_vertex_nearest_to_it_in_its_frame
 
     cloud = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]])  # (T=1, K=2, 3)
     normals = np.array([[[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]])
-    points = np.array([[[0.95, 0.0, 0.0], [0.1, 0.5, 0.0]]])  # inside the second; well off the first
+    points = np.array([[[0.97, 0.0, 0.0], [0.01, 0.03, 0.0]]])  # inside the second; 3 cm off the first
     b, n = nearest_body_points(points, cloud, normals)
     np.testing.assert_array_equal(b[0], cloud[0, [1, 0]])
     np.testing.assert_array_equal(n[0], normals[0, [1, 0]])
@@ -62,6 +62,11 @@ def test_a_vertex_is_measured_against_the_body_vertex_nearest_to_it_in_its_frame
     assert bound[0, 0, 0] == points[0, 0, 0] < 1.0
     with pytest.raises(ArgumentError):
         nearest_body_points(points, cloud[:, :0], normals[:, :0])
+    # further than the search reaches from every body vertex: not near the body, left alone
+    far = np.array([[[0.5, 0.5, 0.0]]])
+    b, n = nearest_body_points(far, cloud, normals, reach=0.05)
+    assert not n.any()
+    np.testing.assert_array_equal(push_out(far, b, n)[0], far)
 
 
 def test_a_coarse_garment_keeps_more_clearance_than_a_fine_one():
@@ -88,7 +93,7 @@ def test_a_non_finite_vertex_is_left_for_the_guard():
 
     cloud = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0]]])
     normals = np.array([[[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]])
-    points = np.array([[[np.nan, 0.0, 0.0], [0.95, 0.0, 0.0]]])
+    points = np.array([[[np.nan, 0.0, 0.0], [0.97, 0.0, 0.0]]])
     b, n = nearest_body_points(points, cloud, normals)
     np.testing.assert_array_equal(b[0, 1], cloud[0, 1])
     out, _ = push_out(points, b, n)
