@@ -336,22 +336,33 @@ def _trousers(m: BodyMeasurements, d: TrousersDesign) -> Pattern:
     calf_y = [m.ankle_y + 0.04, min(m.calf_y, m.knee_y - 1e-3), m.knee_y]
     calf_girth = [m.ankle_girth, m.calf_girth, m.knee_girth]
 
-    def over_calf(outseam: np.ndarray) -> np.ndarray:
+    def calf_short(outseam: np.ndarray) -> float:
+        """How far [m] the outseam falls inside what the calf needs, at worst (<= 0: nowhere)."""
         y = outseam[:, 1]
         below_knee = (y <= m.knee_y) & (y > hem_y)
+        if not below_knee.any():
+            return 0.0
         ease = np.interp(y, [hem_y, max(m.calf_y, hem_y + 1e-3)], [min(d.hem_ease, _CALF_EASE), _CALF_EASE])
         need = inner_hem[0] + (np.interp(y, calf_y, calf_girth) + ease) / 2.0
-        out = outseam.copy()
-        out[below_knee, 0] = np.maximum(out[below_knee, 0], need[below_knee])
-        return out
+        return float(np.max(need[below_knee] - outseam[below_knee, 0]))
 
     def leg(seat: float) -> list:
         """The leg panel's edges; ``seat``: extra half width [m] at the hips and thigh (a back
         panel covers the seat, which the front does not)."""
         outer_thigh = np.array([max(thigh_half + gap, hip_half) + seat, crotch])
+
+        def outseam(lower_x: float) -> np.ndarray:
+            return bezier(outer_hem, [lower_x, 0.5 * (hem_y + crotch)], outer_thigh,
+                          [hip_half + seat, m.hip_y], [top_half, top_y])
+
+        # the lower control point moves out until the calf has its girth: the curve stays smooth
+        lower_x = outer_hem[0]
+        for _ in range(40):
+            if calf_short(outseam(lower_x)) <= 0.0:
+                break
+            lower_x += 0.005
         return [("hem", line(inner_hem, outer_hem)),
-                ("outseam", over_calf(bezier(outer_hem, [outer_hem[0], 0.5 * (hem_y + crotch)], outer_thigh,
-                                             [hip_half + seat, m.hip_y], [top_half, top_y]))),
+                ("outseam", outseam(lower_x)),
                 ("top", line([top_half, top_y], [gap, top_y])),
                 ("centre", line([gap, top_y], crotch_pt)),
                 ("inseam", bezier(crotch_pt, [inner_hem[0], crotch - 0.1], inner_hem))]
