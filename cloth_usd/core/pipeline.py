@@ -40,7 +40,8 @@ from .scene import Category
 from .skinning import SkinBinding, bind_worn, skin_garment
 
 __all__ = ["GarmentPair", "BodyPatch", "body_patch", "body_under", "CONTACT_REACH", "PosedBody", "prepare_pair",
-           "pose_body", "coarse_model_features", "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn", "CoarseBase", "coarse_base_points"]
+           "pose_body", "coarse_model_features", "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn",
+           "CoarseBase", "coarse_base_points"]
 
 #: A coarse model: ``(features (B, N, 7), graph) -> delta (B, N, 3) [m]``.
 CoarseFn = Callable[[np.ndarray, MeshGraph], np.ndarray]
@@ -107,8 +108,9 @@ class BodyPatch:
     contact: np.ndarray
     """(V'',) int64 the body under the garment, indexing ``vertices``: the associated body
     vertices and every body vertex within :data:`CONTACT_REACH` of the rest garment, in the
-    T-pose or with the arms lowered (:func:`body_under`), each once. The post-process (and the physics objective's nearest contact) looks here for the
-    body point nearest to a garment vertex; their normals are exact."""
+    T-pose or with the arms lowered (:func:`body_under`), each once. The post-process (and
+    the physics objective's nearest contact) looks here for the body point nearest to a
+    garment vertex; their normals are exact."""
 
 
 def body_patch(body_faces: np.ndarray, assoc_vertex: np.ndarray, near: np.ndarray | None = None) -> BodyPatch:
@@ -274,9 +276,9 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
 
     ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
     ``coarse_base``, as the coarse model was trained), ``M_detail = M_coarse + detail(...)``,
-    then the post-process (:func:`~cloth_usd.core.postprocess.push_out`, against the
-    associated body vertex nearest to each garment vertex in that frame:
-    :func:`~cloth_usd.core.postprocess.nearest_body_points`).
+    then the post-process (:func:`~cloth_usd.core.postprocess.push_out`, against the body
+    vertex under the garment (:attr:`BodyPatch.contact`) nearest to each garment vertex in
+    that frame: :func:`~cloth_usd.core.postprocess.nearest_body_points`).
 
     Args:
         poses: (T, 72) axis-angle [rad]; transl: (T, 3) root translation [m].

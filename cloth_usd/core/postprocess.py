@@ -3,8 +3,9 @@
 A garment vertex that penetrates the body, or sits closer than ``margin`` to it, is moved
 out along the normal of a body vertex ``b`` until it is ``margin`` in front of that
 vertex's tangent plane: ``s = dot(p - b, n)``; if ``s < margin``: ``p += (margin - s) n``.
-The body vertex is the one nearest to the garment vertex in that frame, among the garment's
-associated body vertices (:func:`nearest_body_points`): a vertex that slid along the body, or
+The body vertex is the one nearest to the garment vertex in that frame, among the body
+under the garment (:func:`nearest_body_points`; the candidates are
+:attr:`~cloth_usd.core.pipeline.BodyPatch.contact`): a vertex that slid along the body, or
 a skirt swung into the other thigh, is measured against the body under it, not against the
 body vertex it was bound to at rest. Shape letters: T frames, N garment vertices, K
 candidate body vertices.
@@ -16,7 +17,8 @@ import numpy as np
 
 from ..errors import ArgumentError
 
-__all__ = ["push_out", "nearest_body_points", "garment_margin", "DEFAULT_MARGIN", "LIMB_RADIUS", "SEARCH_REACH"]
+__all__ = ["push_out", "nearest_vertex", "nearest_body_points", "garment_margin", "DEFAULT_MARGIN", "LIMB_RADIUS",
+           "SEARCH_REACH"]
 
 #: Default clearance from the body surface [m] (2 mm).
 DEFAULT_MARGIN = 0.002
@@ -59,6 +61,26 @@ def push_out(points: np.ndarray, body_points: np.ndarray, body_normals: np.ndarr
 SEARCH_REACH = 0.05
 
 
+def nearest_vertex(points: np.ndarray, candidates: np.ndarray, *, reach: float = np.inf) -> np.ndarray:
+    """(T, N) int64 each point's nearest candidate in its frame; ``K`` (one past the last
+    candidate) where none lies within ``reach`` [m] or the point is not finite.
+
+    Args:
+        points: (T, N, 3) garment points [m].
+        candidates: (T, K, 3) the posed body vertices searched [m].
+    """
+    from scipy.spatial import cKDTree
+
+    p = np.asarray(points, dtype=np.float64)
+    c = np.asarray(candidates, dtype=np.float64)
+    index = np.full(p.shape[:2], c.shape[1], dtype=np.int64)
+    for t in range(p.shape[0]):
+        finite = np.isfinite(p[t]).all(axis=1)  # a non-finite vertex stays so (the guard catches it)
+        if finite.any():
+            index[t, finite] = cKDTree(c[t]).query(p[t, finite], distance_upper_bound=reach)[1]
+    return index
+
+
 def nearest_body_points(points: np.ndarray, body_points: np.ndarray, body_normals: np.ndarray, *,
                         reach: float = SEARCH_REACH) -> tuple[np.ndarray, np.ndarray]:
     """Each garment vertex's nearest body vertex in its frame, and that vertex's normal.
@@ -72,24 +94,16 @@ def nearest_body_points(points: np.ndarray, body_points: np.ndarray, body_normal
     Returns:
         ``(body_points (T, N, 3), body_normals (T, N, 3))`` float64, what :func:`push_out` takes.
     """
-    from scipy.spatial import cKDTree
-
     p = np.asarray(points, dtype=np.float64)
     b = np.asarray(body_points, dtype=np.float64)
     n = np.asarray(body_normals, dtype=np.float64)
     if p.ndim != 3 or b.ndim != 3 or b.shape != n.shape or b.shape[0] != p.shape[0] or b.shape[1] == 0:
         raise ArgumentError(f"points (T, N, 3), body_points and body_normals (T, K, 3) with K > 0 expected, got "
                             f"{p.shape}, {b.shape}, {n.shape}")
-    k = b.shape[1]
-    index = np.full(p.shape[:2], k, dtype=np.int64)  # k: none within reach
-    for t in range(p.shape[0]):
-        finite = np.isfinite(p[t]).all(axis=1)  # a non-finite vertex stays so (the guard catches it)
-        if finite.any():
-            index[t, finite] = cKDTree(b[t]).query(p[t, finite], distance_upper_bound=reach)[1]
-    rows = np.arange(p.shape[0])[:, None]
-    b = np.concatenate([b, np.zeros((b.shape[0], 1, 3))], axis=1)
-    n = np.concatenate([n, np.zeros((n.shape[0], 1, 3))], axis=1)
-    return b[rows, index], n[rows, index]
+    index = nearest_vertex(p, b, reach=reach)
+    found = index < b.shape[1]
+    rows, index = np.arange(p.shape[0])[:, None], np.where(found, index, 0)
+    return b[rows, index], n[rows, index] * found[..., None]
 
 
 def garment_margin(rest_points: np.ndarray, faces: np.ndarray, *, base: float = DEFAULT_MARGIN,

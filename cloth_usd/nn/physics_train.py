@@ -73,6 +73,7 @@ from ..core.fit import FitModel
 from ..core.heading import Heading, heading_frame
 from ..core.pipeline import (CoarseBase, GarmentPair, coarse_base_points, coarse_model_features, detail_model_inputs,
                              pose_body, prepare_pair)
+from ..core.postprocess import nearest_vertex
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError, ClothUsdError
 from .data import CoarseTarget, Moments, Split, even_frames, plan_batches
@@ -534,7 +535,7 @@ def _terms(clip: PhysicsClip, x: torch.Tensor, win: _Window, material: Material,
     now = index[-1]
     x_t = x[now]
     if options.contact is ContactPoints.NEAREST:
-        nearest = _nearest(win.inputs.cloud_points[win.index[-1]], x_t.detach().cpu().numpy())
+        nearest = nearest_vertex(x_t.detach().cpu().numpy(), win.inputs.cloud_points[win.index[-1]])
         rows = torch.arange(len(nearest), device=x.device)[:, None]
         nearest = torch.from_numpy(nearest).to(x.device)
         points = torch.from_numpy(win.inputs.cloud_points).to(x)[index][:, rows, nearest]
@@ -558,17 +559,6 @@ def _terms(clip: PhysicsClip, x: torch.Tensor, win: _Window, material: Material,
                                             dt=clip.dt, epsilon=options.friction_epsilon)
     terms["total"] = sum(terms[name] for name in TERMS)
     return terms
-
-
-def _nearest(cloud: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """(B, N) int64 the index of each garment vertex's nearest cloud point, per frame.
-
-    Args:
-        cloud: (B, C, 3) body points [m]; x: (B, N, 3) garment points [m].
-    """
-    from scipy.spatial import cKDTree
-
-    return np.stack([cKDTree(c).query(g)[1] for c, g in zip(cloud, x)]).astype(np.int64)
 
 
 def _supervised(clip: PhysicsClip, x_t: torch.Tensor, t: np.ndarray, weight: float) -> torch.Tensor | None:

@@ -139,10 +139,11 @@ def test_nearest_contact_measures_a_sliding_vertex_against_the_body_under_it(pla
     """A garment vertex moved along the body, 4 mm off it, is outside the body: the nearest
     contact puts it against the body point under it (almost no contact energy); the associated
     contact still measures it against the body point it left."""
-    from cloth_usd.nn.physics_train import ContactPoints, PhysicsOptions, _nearest
+    from cloth_usd.core.postprocess import nearest_vertex
+    from cloth_usd.nn.physics_train import ContactPoints, PhysicsOptions
 
     cloud = np.array([[[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]])
-    np.testing.assert_array_equal(_nearest(cloud, np.array([[[0.9, 0.1, 0.0], [0.1, 0.2, 0.0]]])), [[1, 0]])
+    np.testing.assert_array_equal(nearest_vertex(np.array([[[0.9, 0.1, 0.0], [0.1, 0.2, 0.0]]]), cloud), [[1, 0]])
     assert PhysicsOptions().contact is ContactPoints.NEAREST
     assert PhysicsOptions(contact="associated").to_json()["contact"] == "associated"
     with pytest.raises(ArgumentError, match="contact must be one of nearest, associated"):
