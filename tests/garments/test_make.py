@@ -57,17 +57,17 @@ def test_command_errors_are_one_line_before_any_work(tmp_path, capsys):
 
 
 @pytest.mark.slow
-# Trousers miss the 1.05 target (the waistband and the seat carry their weight; see the README).
-@pytest.mark.parametrize("category, preset, p99", [("tshirt", "classic", 1.08), ("dress", "a-line", 1.08),
-                                                   ("trousers", "shorts", 1.15)])
-def test_made_garment_is_sewn_closed_and_drapes_to_its_pattern(tmp_path, capsys, category, preset, p99):
+# p99 at 400 vertices before the relax and settle phases: 1.035, 1.023, 1.052 (largest edge
+# 1.10); with them 1.022, 1.007, 1.038 (1.05).
+@pytest.mark.parametrize("category, preset", [("tshirt", "classic"), ("dress", "a-line"), ("trousers", "shorts")])
+def test_made_garment_is_sewn_closed_and_drapes_to_its_pattern(tmp_path, capsys, category, preset):
     pytest.importorskip("newton")
     out, report = tmp_path / "g.usda", tmp_path / "g.json"
     assert main(["garment", "make", category, "--preset", preset, "-o", str(out), "--vertices", "400",
                  "--betas", "0.5", "-0.3", "--report", str(report)]) == 0
     assert "stretch" in capsys.readouterr().out
     figures = json.loads(report.read_text())
-    assert figures["stretch_p99"] < p99 and figures["stretch_max"] < 1.4  # a coarse mesh: looser than 1.05
+    assert figures["stretch_p99"] <= 1.05 and figures["stretch_max"] < 1.08
     scene = read_scene(open_stage(out))
     (garment,) = scene.garments
     assert garment.category.value == category and np.all(np.isfinite(garment.rest_points))
