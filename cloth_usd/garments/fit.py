@@ -8,9 +8,9 @@
    is placed by the binding on our body posed into MakeHuman's rest pose
    (:mod:`~cloth_usd.garments.mhclo`); its skinning weights are the body's at its bound
    points. Any other garment is aligned rigidly (translation, after the units) to our
-   body in each of a few arm poses from the T-pose to MakeHuman's A-pose and each quarter
-   turn about the up axis (a garment modelled facing another way than +Z), and the pose
-   and turn it lies closest to win; its skinning weights are the body's at each vertex's closest
+   body in each of a few arm poses from the T-pose to MakeHuman's A-pose and each turn
+   about the up axis in steps of 30 degrees (a garment modelled facing another way than
+   +Z), the pose and turn it lies closest to win, and the turn is refined to about a degree; its skinning weights are the body's at each vertex's closest
    surface point, smoothed over the garment.
 3. **Unposed to the T-pose** through those weights (inverse linear blend skinning), moved
    out of the body (:func:`~cloth_usd.garments.sew.push_out`) and draped under gravity on
@@ -69,15 +69,22 @@ class FitConfig:
     first and the last of ``arm_poses`` is taken only if its alignment distance is this
     fraction smaller (a short sleeve hangs a little below the T-posed arm, which a slightly
     lowered arm matches as well)."""
-    turns: tuple[float, ...] = (0.0, 90.0, 180.0, 270.0)
+    turns: tuple[float, ...] = tuple(float(a) for a in range(0, 360, 30))
     """Turns about the up axis [deg] tried for a garment without a binding (0: it faces +Z,
-    as the body does)."""
+    as the body does); the best is then refined (:attr:`turn_refine`)."""
+    turn_refine: float = 0.5
+    """The best turn is refined by halving steps from half the grid's spacing down to the
+    last one no smaller than this [deg] (15, 7.5, ... 0.94), each taken only where it brings
+    the garment closer to the body; 0 keeps the grid's turn."""
     turn_margin: float = 0.15
     """A turn other than 0 is taken only if its alignment distance is this fraction smaller:
     a garment's front and back look alike, so the file's own facing is trusted unless
     another is clearly closer."""
     icp_iterations: int = 20
     """Translation updates of the rigid alignment."""
+    align_sample: int = 2000
+    """At most this many of the garment's vertices (evenly spread over its numbering) are
+    aligned when turns and arm poses are compared; the garment then moves as they do."""
     weight_smoothing: int = 10
     """Passes of neighbour averaging of the skinning weights over the garment."""
     clearance: float = 0.006
@@ -237,6 +244,33 @@ def _turn_y(degrees: float) -> np.ndarray:
     return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
 
 
+def _sample(count: int, most: int) -> np.ndarray:
+    """(min(count, most),) int64 indices spread evenly over ``range(count)``."""
+    return np.unique(np.linspace(0, count - 1, min(count, max(most, 1))).astype(np.int64))
+
+
+def _refine_turn(upright: np.ndarray, turn: float, score: float, placed: np.ndarray, category: str,
+                 posed: np.ndarray, faces: np.ndarray, joints: np.ndarray,
+                 config: FitConfig) -> tuple[float, float, np.ndarray]:
+    """``(turn [deg], score [m], placed (N, 3))``: the grid's best turn refined by halving steps
+    about the up axis (a garment modelled at 137 degrees is found at 120 or 150 on a
+    30-degree grid, then brought within about a degree)."""
+    turns = np.sort(np.asarray(config.turns, dtype=np.float64) % 360.0)
+    if config.turn_refine <= 0 or len(turns) < 2:
+        return turn, score, placed
+    step = 0.5 * float(np.min(np.diff(np.r_[turns, turns[0] + 360.0])))
+    while step >= config.turn_refine:
+        for candidate in (turn - step, turn + step):
+            pts = upright @ _turn_y(candidate).T
+            shift, value = _align(pts[_sample(len(pts), config.align_sample)], category, posed, faces, joints,
+                                  config.icp_iterations)
+            if value < score:
+                turn, score, placed = candidate, value, pts + shift
+                break
+        step *= 0.5
+    return turn, score, placed
+
+
 def _check_shape(src: SourceMesh, tri: np.ndarray) -> None:
     name = src.source or "the mesh"
     if src.num_vertices < 3 or not len(tri):
@@ -298,19 +332,22 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
         ups = [src.up_axis] if src.up_axis else ["Y", "Z"]
         best = None
         poses = {frac: _pose(body, v_rest, joints, a_pose * frac) for frac in config.arm_poses}
+        sample = _sample(src.num_vertices, config.align_sample)
         ends = (config.arm_poses[0], config.arm_poses[-1])
         for up in ups:
             upright = src.points * unit @ (_Z_UP.T if up == "Z" else np.eye(3))
             for turn in config.turns:
                 pts = upright @ _turn_y(turn).T
                 for frac, posed in poses.items():
-                    shift, score = _align(pts, category, posed, body.faces, joints, config.icp_iterations)
+                    shift, score = _align(pts[sample], category, posed, body.faces, joints, config.icp_iterations)
                     log.debug("up %s turn %g arm pose %.2f: mean distance %.1f mm", up, turn, frac, score * 1e3)
                     ranked = score * (1.0 + config.in_between_margin) if frac not in ends else score
                     ranked *= (1.0 + config.turn_margin) if turn % 360.0 else 1.0
                     if best is None or ranked < best[0]:
-                        best = (ranked, score, up, turn, frac, pts + shift, a_pose * frac, posed)
-        _, score, up, turn, frac, posed_points, pose, posed = best
+                        best = (ranked, score, up, turn, frac, pts + shift, a_pose * frac, posed, upright)
+        _, score, up, turn, frac, posed_points, pose, posed, upright = best
+        turn, score, posed_points = _refine_turn(upright, turn, score, posed_points, category, posed, body.faces,
+                                                 joints, config)
         a = associate(posed_points, posed, body.faces)
         weights = np.einsum("nk,nkj->nj", a.barycentric, body.weights[body.faces[a.triangle]])
         weights = _smooth_weights(weights, tri, config.weight_smoothing)
@@ -319,7 +356,7 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
             raise GarmentFitError(f"{src.source}: does not fit the body: after alignment its median vertex is "
                                   f"{median:.2f} m from the body's surface (at most {config.max_median_distance} m); "
                                   "is it a garment, and in the units its file says?")
-        report.update(method="shape", units_m=unit, units_from=units_from, up_axis=up, turned_deg=float(turn),
+        report.update(method="shape", units_m=unit, units_from=units_from, up_axis=up, turned_deg=round(float(turn) % 360.0, 1),
                       arm_pose=frac,
                       align_mean_mm=round(score * 1e3, 1), **({"mhclo_skipped": why_not} if mhclo is not None else {}))
     keep, dropped = _keep_pieces(posed_points, tri, category, joints)
