@@ -19,7 +19,7 @@ detail tier. Per bake, over every frame of the clip:
 Writes ``OUT/mocap_tiers.md`` (also printed) and ``OUT/mocap_tiers.json``.
 
 Run: python bench/bench_mocap_tiers.py --mocap DIR --clip cmu-mb.../05/05_02.bvh:120:400
-         [--clip ...] [--bundle models/bundles/tshirt-v3 ...] [--garment GARMENT.usda] [--out out/mocap_tiers]
+         [--clip ...] [--bundle BUNDLE ...] [--garment GARMENT.usda] [--out out/mocap_tiers]
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ from pxr import Sdf
 from cloth_usd.core.body import load_body_model, posed_vertices, shape_body
 from cloth_usd.datagen.simulate import penetration_fraction, unique_edges
 from cloth_usd.usd.read import open_stage, read_motion, read_scene
+from cloth_usd.runtime.bundle import find_bundle
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "samples" / "walk_tshirt" / "scene.usda"
@@ -78,16 +79,22 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mocap", required=True, help="the mocap folder")
     ap.add_argument("--clip", action="append", required=True, help="FILE[:A:B] under --mocap (file frames A..B)")
-    ap.add_argument("--bundle", action="append", help="bundle folder (repeatable; default the shipped one)")
+    ap.add_argument("--bundle", action="append", help="bundle folder (repeatable; default the shipped default for the garment's category)")
     ap.add_argument("--garment", default=str(SAMPLE),
                     help="a stage with the garment to wear (import-motion --garment; default the sample's T-shirt)")
     ap.add_argument("--out", default="out/mocap_tiers")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    bundles = args.bundle or [str(ROOT / "models" / "bundles" / "tshirt-v3")]
     body = load_body_model()
     garment = read_scene(open_stage(args.garment)).garments[0]  # the garment, as the baker reads it
+    if args.bundle:
+        bundles = args.bundle
+    else:  # what a bake would run: the shipped default for the garment's category
+        shipped = find_bundle(garment.category)
+        if shipped is None:
+            ap.error(f"no shipped bundle for a {garment.category.value}; name one with --bundle")
+        bundles = [str(shipped.path)]
     rest, faces = garment.rest_points, garment.triangles
     edges = unique_edges(faces)
     energy = _bending(rest, faces)
