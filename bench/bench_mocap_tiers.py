@@ -34,9 +34,9 @@ import numpy as np
 from pxr import Sdf
 
 from cloth_usd.core.body import load_body_model, posed_vertices, shape_body
-from cloth_usd.datagen.simulate import penetration_fraction, unique_edges
-from cloth_usd.usd.read import open_stage, read_motion, read_scene
+from cloth_usd.datagen.simulate import body_side, unique_edges
 from cloth_usd.runtime.bundle import find_bundle
+from cloth_usd.usd.read import open_stage, read_motion, read_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "samples" / "walk_tshirt" / "scene.usda"
@@ -69,6 +69,15 @@ def _stretch(points: np.ndarray, ref: np.ndarray, edges: np.ndarray) -> np.ndarr
     return length / np.maximum(ref_len, 1e-4)
 
 
+def _inside(points: np.ndarray, body_points: np.ndarray, body_faces: np.ndarray) -> tuple[float, float]:
+    """The fractions of ``points`` inside the body and deeper than 1 mm in it
+    (``penetration_fraction``'s measure, the body searched once); NaN for a non-finite frame."""
+    if not np.isfinite(points).all():
+        return float("nan"), float("nan")
+    side = body_side(points, body_points, body_faces)
+    return float(np.mean(side < 0.0)), float(np.mean(side < -1e-3))
+
+
 def _garment_report(provenance: dict) -> dict:
     """The first garment's record of a cache's provenance (``customLayerData["cloth_usd"]``)."""
     garments = dict(provenance.get("cloth_usd", {}).get("garments", {}))
@@ -79,7 +88,8 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mocap", required=True, help="the mocap folder")
     ap.add_argument("--clip", action="append", required=True, help="FILE[:A:B] under --mocap (file frames A..B)")
-    ap.add_argument("--bundle", action="append", help="bundle folder (repeatable; default the shipped default for the garment's category)")
+    ap.add_argument("--bundle", action="append",
+                    help="bundle folder (repeatable; default the shipped default for the garment's category)")
     ap.add_argument("--garment", default=str(SAMPLE),
                     help="a stage with the garment to wear (import-motion --garment; default the sample's T-shirt)")
     ap.add_argument("--out", default="out/mocap_tiers")
@@ -122,9 +132,7 @@ def main(argv=None) -> int:
             report = _garment_report(prov)
             vs_rest, vs_skin = _stretch(pts, rest, edges), _stretch(pts, skinned, edges)
             p99_rest, p99_skin = np.percentile(vs_rest, 99, axis=1), np.percentile(vs_skin, 99, axis=1)
-            inside = [penetration_fraction(pts[t], bodies[t], body.faces) for t in range(0, len(times), 5)]
-            deep = [penetration_fraction(pts[t], bodies[t], body.faces, tolerance=1e-3)
-                    for t in range(0, len(times), 5)]
+            inside, deep = np.array([_inside(pts[t], bodies[t], body.faces) for t in range(0, len(times), 5)]).T
             row = {"clip": label, "frames": len(times), "bundle": bundle or "-", "tier": tier,
                    "fallback_coarse": int(report.get("fallback_coarse", 0)),
                    "fallback_skinning": int(report.get("fallback_skinning", 0)),

@@ -192,7 +192,8 @@ def _shirt_label(params) -> str:
 def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     """Every sequence of the data set, each tagged with its split in ``meta``."""
     body = body if body is not None else load_body_model()
-    owns = [load_own_garment(f) for f in own_garment_files(config)]
+    files = own_garment_files(config)
+    owns = [load_own_garment(f) for f in files]
     categories = sorted({g.category for g in owns})
     if len(categories) > 1:
         raise ArgumentError(f"garment: the garments are of several categories ({', '.join(categories)}); a data set "
@@ -238,7 +239,6 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
         if config.test_shirts and config.test_bodies else []
     garments: dict[tuple[int, str], tuple[np.ndarray, np.ndarray]] = {}
     jobs = []
-    files = own_garment_files(config)
     for split, s, b, motion in plan:
         betas = owns[s].betas if b == OWN_BODY else shapes[b].betas
         if (s, b) not in garments:

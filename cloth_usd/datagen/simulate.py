@@ -44,6 +44,7 @@ __all__ = [
     "simulate",
     "drape",
     "penetration_fraction",
+    "body_side",
     "edge_stretch",
     "edge_ratios",
     "engine_versions",
@@ -358,12 +359,23 @@ def penetration_fraction(points: np.ndarray, body_vertices: np.ndarray, body_fac
     points = np.asarray(points, dtype=np.float64)
     if points.shape[0] == 0 or not np.all(np.isfinite(points)):
         return float("nan")
+    return float(np.mean(body_side(points, body_vertices, body_faces) < -tolerance))
+
+
+def body_side(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray) -> np.ndarray:
+    """(N,) ``(p - closest) . n`` of finite points against a closed body, negative inside:
+    what :func:`penetration_fraction` thresholds (``n`` the interpolated vertex normal at
+    the closest surface point, not renormalised).
+
+    Args:
+        points: (N, 3) garment vertices [m]; body_vertices: (V, 3) posed body [m];
+        body_faces: (F, 3) body triangles.
+    """
     a = associate(points, body_vertices, body_faces)
     corners = body_faces[a.triangle]
     closest = np.einsum("nk,nkc->nc", a.barycentric, body_vertices[corners])
     normal = np.einsum("nk,nkc->nc", a.barycentric, _vertex_normals(body_vertices, body_faces)[corners])
-    side = np.einsum("nc,nc->n", points - closest, normal)
-    return float(np.mean(side < -tolerance))
+    return np.einsum("nc,nc->n", points - closest, normal)
 
 
 def unique_edges(faces: np.ndarray) -> np.ndarray:

@@ -10,8 +10,9 @@
    points. Any other garment is aligned rigidly (translation, after the units) to our
    body in each of a few arm poses from the T-pose to MakeHuman's A-pose and each turn
    about the up axis in steps of 30 degrees (a garment modelled facing another way than
-   +Z), the pose and turn it lies closest to win, and the turn is refined to about a degree; its skinning weights are the body's at each vertex's closest
-   surface point, smoothed over the garment.
+   +Z), the pose and turn it lies closest to win, and the turn is refined to about a
+   degree; its skinning weights are the body's at each vertex's closest surface point,
+   smoothed over the garment.
 3. **Unposed to the T-pose** through those weights (inverse linear blend skinning), moved
    out of the body (:func:`~cloth_usd.garments.sew.push_out`) and draped under gravity on
    the T-posed body with Newton, its rest shape being its own unposed shape; what the
@@ -37,6 +38,7 @@ from scipy.spatial import cKDTree
 from ..core.association import Association, associate
 from ..core.body import BodyModel, joint_transforms, lbs, shape_body
 from ..core.features import vertex_normals
+from ..core.heading import yaw_matrices
 from ..core.rotations import axis_angle_to_matrix
 from .mhclo import Mhclo, bind_mhclo, load_hm08_map, mhclo_applies
 from .sew import push_out
@@ -237,33 +239,25 @@ def _align(points: np.ndarray, category: str, posed: np.ndarray, faces: np.ndarr
     return best_shift, best
 
 
-def _turn_y(degrees: float) -> np.ndarray:
-    """(3, 3) the rotation by ``degrees`` about +Y (right-handed)."""
-    a = np.deg2rad(degrees)
-    c, s = np.cos(a), np.sin(a)
-    return np.array([[c, 0.0, s], [0.0, 1.0, 0.0], [-s, 0.0, c]])
-
-
 def _sample(count: int, most: int) -> np.ndarray:
     """(min(count, most),) int64 indices spread evenly over ``range(count)``."""
     return np.unique(np.linspace(0, count - 1, min(count, max(most, 1))).astype(np.int64))
 
 
-def _refine_turn(upright: np.ndarray, turn: float, score: float, placed: np.ndarray, category: str,
-                 posed: np.ndarray, faces: np.ndarray, joints: np.ndarray,
+def _refine_turn(upright: np.ndarray, sample: np.ndarray, turn: float, score: float, placed: np.ndarray,
+                 category: str, posed: np.ndarray, faces: np.ndarray, joints: np.ndarray,
                  config: FitConfig) -> tuple[float, float, np.ndarray]:
     """``(turn [deg], score [m], placed (N, 3))``: the grid's best turn refined by halving steps
     about the up axis (a garment modelled at 137 degrees is found at 120 or 150 on a
-    30-degree grid, then brought within about a degree)."""
+    30-degree grid, then brought within about a degree); ``sample`` the vertices aligned."""
     turns = np.sort(np.asarray(config.turns, dtype=np.float64) % 360.0)
     if config.turn_refine <= 0 or len(turns) < 2:
         return turn, score, placed
     step = 0.5 * float(np.min(np.diff(np.r_[turns, turns[0] + 360.0])))
     while step >= config.turn_refine:
         for candidate in (turn - step, turn + step):
-            pts = upright @ _turn_y(candidate).T
-            shift, value = _align(pts[_sample(len(pts), config.align_sample)], category, posed, faces, joints,
-                                  config.icp_iterations)
+            pts = upright @ yaw_matrices(np.deg2rad(candidate)).T
+            shift, value = _align(pts[sample], category, posed, faces, joints, config.icp_iterations)
             if value < score:
                 turn, score, placed = candidate, value, pts + shift
                 break
@@ -337,7 +331,7 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
         for up in ups:
             upright = src.points * unit @ (_Z_UP.T if up == "Z" else np.eye(3))
             for turn in config.turns:
-                pts = upright @ _turn_y(turn).T
+                pts = upright @ yaw_matrices(np.deg2rad(turn)).T
                 for frac, posed in poses.items():
                     shift, score = _align(pts[sample], category, posed, body.faces, joints, config.icp_iterations)
                     log.debug("up %s turn %g arm pose %.2f: mean distance %.1f mm", up, turn, frac, score * 1e3)
@@ -346,8 +340,8 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
                     if best is None or ranked < best[0]:
                         best = (ranked, score, up, turn, frac, pts + shift, a_pose * frac, posed, upright)
         _, score, up, turn, frac, posed_points, pose, posed, upright = best
-        turn, score, posed_points = _refine_turn(upright, turn, score, posed_points, category, posed, body.faces,
-                                                 joints, config)
+        turn, score, posed_points = _refine_turn(upright, sample, turn, score, posed_points, category, posed,
+                                                 body.faces, joints, config)
         a = associate(posed_points, posed, body.faces)
         weights = np.einsum("nk,nkj->nj", a.barycentric, body.weights[body.faces[a.triangle]])
         weights = _smooth_weights(weights, tri, config.weight_smoothing)
@@ -356,8 +350,8 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
             raise GarmentFitError(f"{src.source}: does not fit the body: after alignment its median vertex is "
                                   f"{median:.2f} m from the body's surface (at most {config.max_median_distance} m); "
                                   "is it a garment, and in the units its file says?")
-        report.update(method="shape", units_m=unit, units_from=units_from, up_axis=up, turned_deg=round(float(turn) % 360.0, 1),
-                      arm_pose=frac,
+        report.update(method="shape", units_m=unit, units_from=units_from, up_axis=up,
+                      turned_deg=round(float(turn) % 360.0, 1), arm_pose=frac,
                       align_mean_mm=round(score * 1e3, 1), **({"mhclo_skipped": why_not} if mhclo is not None else {}))
     keep, dropped = _keep_pieces(posed_points, tri, category, joints)
     rest = _unpose(posed_points, weights, joints, pose, body.parents)

@@ -407,10 +407,11 @@ def test_a_fitted_garment_fits_again_in_place(body):
 def test_fit_by_shape_turns_a_garment_that_faces_another_way(body, turn):
     """The body's own torso and arms, turned about the up axis: the fit turns it back, to
     about a degree at angles off its 30-degree grid (before that grid, only quarter turns)."""
-    from cloth_usd.garments.fit import _turn_y
+    from cloth_usd.core.heading import yaw_matrices
 
     rest, _, faces = _region_mesh(body, [3, 6, 9, 13, 14, 16, 17, 18, 19])
-    src = SourceMesh(points=rest @ _turn_y(-turn).T, face_counts=np.full(len(faces), 3), face_indices=faces.ravel(),
+    src = SourceMesh(points=rest @ yaw_matrices(np.deg2rad(-turn)).T, face_counts=np.full(len(faces), 3),
+                     face_indices=faces.ravel(),
                      uv=None, uv_indices=None, meters_per_unit=1.0, up_axis="Y", source="synthetic")
     fitted = fit_garment(src, "tshirt", np.zeros(10), body=body, config=FitConfig(drape_frames=0))
     assert abs((fitted.report["turned_deg"] - turn + 180.0) % 360.0 - 180.0) <= 1.0, fitted.report["turned_deg"]
