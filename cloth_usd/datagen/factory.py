@@ -79,6 +79,11 @@ class FactoryConfig:
     """Simulate only the sequences of these splits (a test set: ``["test_motion"]``); the fit
     attribute is still fitted on the training pairs, as planned (undraped) where they are not
     simulated. None: all."""
+    simulate_sequences: dict | None = None
+    """Per split, how many of its sequences to simulate, drawn at random (``seed``) without
+    replacement; a split it does not name is simulated whole (``{"train": 80}``: simulated
+    targets for part of a physics data set, where the hybrid objective adds its supervised
+    term). None: all."""
     floor: dict | None = None
     """The per-frame error floor (a :class:`FloorSpec`'s fields): for some of the sequences
     to be simulated, a few of their frames' poses held until the cloth settles, each its own
@@ -213,6 +218,11 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     bad = sorted(set(config.simulate_splits or ()) - set(splits))
     if bad:
         raise ArgumentError(f"simulate_splits {bad}: unknown (valid: {', '.join(splits)})")
+    counts = config.simulate_sequences
+    if counts is not None and (not isinstance(counts, dict) or any(
+            k not in splits or isinstance(n, bool) or not isinstance(n, int) or n < 1 for k, n in counts.items())):
+        raise ArgumentError(f"simulate_sequences must map splits ({', '.join(splits)}) to whole numbers >= 1, "
+                            f"got {counts!r}")
     shapes = {s.name: s for s in body_shapes([b for b in config.bodies if b != OWN_BODY])}
     if own is None and OWN_BODY in config.bodies:
         raise ArgumentError(f"bodies: {OWN_BODY!r} is the body of the config's own garment, and it names none")
@@ -258,10 +268,22 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
             name=f"{split}.shirt{s}.{b}.{motion.name}", garment_vertices=verts, garment_faces=faces,
             betas=betas, poses=motion.poses, transl=motion.transl, seed=config.seed, meta=meta))
     if config.floor is not None:
-        spec = FloorSpec.from_mapping(config.floor)
-        simulated = [j for j in jobs if config.simulate_splits is None or j.meta["split"] in config.simulate_splits]
-        jobs += floor_jobs(simulated, spec)
+        jobs += floor_jobs(_to_simulate(config, jobs), FloorSpec.from_mapping(config.floor))
     return jobs
+
+
+def _to_simulate(config: FactoryConfig, jobs: list[Job]) -> list[Job]:
+    """The planned sequences the factory simulates, in plan order: those of ``simulate_splits``,
+    ``simulate_sequences`` of them drawn at random, and every floor sequence."""
+    chosen = [j for j in jobs if j.meta["split"] != FLOOR_SPLIT
+              and (config.simulate_splits is None or j.meta["split"] in config.simulate_splits)]
+    for split, count in (config.simulate_sequences or {}).items():
+        inside = [k for k, j in enumerate(chosen) if j.meta["split"] == split]
+        if count < len(inside):
+            drop = set(inside) - {inside[i] for i in np.random.default_rng(config.seed).choice(len(inside), count,
+                                                                                            replace=False)}
+            chosen = [j for k, j in enumerate(chosen) if k not in drop]
+    return chosen + [j for j in jobs if j.meta["split"] == FLOOR_SPLIT]
 
 
 #: The body name of a config's own garment (:attr:`FactoryConfig.garment`): the body it was made for.
@@ -430,8 +452,7 @@ def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1)
     body = load_body_model()
     planned = plan_jobs(config, body)
     log.info("%d sequences planned", len(planned))
-    simulated = [j for j in planned if config.simulate_splits is None
-                 or j.meta["split"] in (*config.simulate_splits, FLOOR_SPLIT)]
+    simulated = _to_simulate(config, planned)
     wanted, drape_failed = drape_pairs(simulated, out, config.sim, workers=workers)
     # The fit attribute is fitted on the training pairs: draped where they are simulated, as
     # planned where simulate_splits leaves them out (a test set is never trained on).
@@ -453,10 +474,7 @@ def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1)
                 list(pool.map(_worker, parts))
     finally:
         merged = _merge_worker_manifests(out)
-        for job in planned:
-            if config.simulate_splits is not None and job.meta["split"] not in (*config.simulate_splits,
-                                                                                 FLOOR_SPLIT):
-                continue
+        for job in simulated:
             if _pair(job) in drape_failed:
                 merged.sequences[job.name] = {"status": "rejected", "shard": None, "seed": int(job.seed),
                                               "digest": None, "meta": job.meta,

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -119,3 +120,33 @@ def test_an_interrupted_run_leaves_a_merged_manifest_and_resumes(tmp_path, monke
     planned = [j for j in plan_jobs(config) if j.meta["split"] in ("test_body", "test_garment")]
     assert set(merged.sequences) == {j.name for j in planned}
     assert len(calls) == len(planned) - 1  # the interrupted run's sequence is not redone
+
+
+def test_simulate_sequences_draws_part_of_the_plan(tmp_path, monkeypatch):
+    """simulate_sequences simulates that many of the selected splits' sequences, drawn by the
+    config's seed; the rest stay planned (named by the physics objective) but are neither
+    draped nor simulated. A bad count is one line naming the key."""
+    from cloth_usd.datagen import factory
+
+    config = FactoryConfig(**{**TINY, "simulate_splits": ["train", "test_body"], "simulate_sequences": {"train": 5},
+                              "train_motions": [{"kind": k, "seconds": 1.0, "seed": i}
+                                                for i, k in enumerate(("walk", "run", "dance"))]})
+    planned = plan_jobs(config)
+    train = [j.name for j in planned if j.meta["split"] == "train"]
+    test_body = [j.name for j in planned if j.meta["split"] == "test_body"]
+    chosen = [j.name for j in factory._to_simulate(config, planned)]
+    assert len(train) == 12 and len(set(chosen)) == 5 + len(test_body)  # the split it does not name: whole
+    assert chosen == [j.name for j in planned if j.name in chosen] and set(test_body) < set(chosen)
+    assert chosen == [j.name for j in factory._to_simulate(config, plan_jobs(config))]  # the same draw
+    other = dataclasses.replace(config, seed=1)
+    assert chosen != [j.name for j in factory._to_simulate(other, plan_jobs(other))]
+
+    draped, simulated = [], []
+    monkeypatch.setattr(factory, "drape_pairs", lambda jobs, out, sim, workers=1: (draped.extend(jobs), (jobs, {}))[1])
+    monkeypatch.setattr(factory, "_worker", lambda args: simulated.extend(args[0]))
+    factory.run_factory(config, tmp_path / "data")
+    assert [j.name for j in draped] == [j.name for j in simulated] == chosen
+
+    for bad in (5, {"train": 0}, {"train": 2.5}, {"train": True}, {"trian": 5}):
+        with pytest.raises(ArgumentError, match="simulate_sequences"):
+            plan_jobs(FactoryConfig(**{**TINY, "simulate_sequences": bad}))
