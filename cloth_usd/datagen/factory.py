@@ -277,13 +277,13 @@ def _to_simulate(config: FactoryConfig, jobs: list[Job]) -> list[Job]:
     ``simulate_sequences`` of them drawn at random, and every floor sequence."""
     chosen = [j for j in jobs if j.meta["split"] != FLOOR_SPLIT
               and (config.simulate_splits is None or j.meta["split"] in config.simulate_splits)]
+    drop: set[int] = set()
     for split, count in (config.simulate_sequences or {}).items():
         inside = [k for k, j in enumerate(chosen) if j.meta["split"] == split]
         if count < len(inside):
-            drop = set(inside) - {inside[i] for i in np.random.default_rng(config.seed).choice(len(inside), count,
-                                                                                            replace=False)}
-            chosen = [j for k, j in enumerate(chosen) if k not in drop]
-    return chosen + [j for j in jobs if j.meta["split"] == FLOOR_SPLIT]
+            kept = np.random.default_rng(config.seed).choice(len(inside), count, replace=False)
+            drop |= set(inside) - {inside[i] for i in kept}
+    return [j for k, j in enumerate(chosen) if k not in drop] + [j for j in jobs if j.meta["split"] == FLOOR_SPLIT]
 
 
 #: The body name of a config's own garment (:attr:`FactoryConfig.garment`): the body it was made for.
@@ -455,7 +455,8 @@ def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1)
     simulated = _to_simulate(config, planned)
     wanted, drape_failed = drape_pairs(simulated, out, config.sim, workers=workers)
     # The fit attribute is fitted on the training pairs: draped where they are simulated, as
-    # planned where simulate_splits leaves them out (a test set is never trained on).
+    # planned where simulate_splits or simulate_sequences leaves them out (a test set is never
+    # trained on).
     draped = {_pair(j): j.garment_vertices for j in wanted}
     jobs = [dataclasses.replace(j, garment_vertices=draped[_pair(j)]) if _pair(j) in draped else j
             for j in planned if _pair(j) not in drape_failed]
