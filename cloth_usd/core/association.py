@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["Association", "associate", "closest_point_on_triangles"]
+__all__ = ["Association", "associate", "closest_point_on_triangles", "incident_faces"]
 
 
 @dataclass(frozen=True)
@@ -104,8 +104,8 @@ def _nearest_edge_barycentric(tri: np.ndarray, p: np.ndarray) -> np.ndarray:
     return best
 
 
-def _incident_faces(faces: np.ndarray, num_vertices: int) -> np.ndarray:
-    """(V, D) int64 faces around each vertex, padded with -1."""
+def incident_faces(faces: np.ndarray, num_vertices: int) -> np.ndarray:
+    """(V, D) int64 the triangles around each vertex (rows of ``faces`` (F, 3)), padded with -1."""
     flat_v = faces.ravel()
     flat_f = np.repeat(np.arange(faces.shape[0]), 3)
     order = np.argsort(flat_v, kind="stable")
@@ -133,7 +133,7 @@ def associate(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndar
     points = np.asarray(points, dtype=np.float64)
     tree = cKDTree(body_vertices)
     k = min(candidates, body_vertices.shape[0])
-    ring = _incident_faces(body_faces, body_vertices.shape[0])
+    ring = incident_faces(body_faces, body_vertices.shape[0])
     n = points.shape[0]
     triangle = np.empty(n, dtype=np.int64)
     bary = np.empty((n, 3))

@@ -30,17 +30,19 @@ from typing import Callable
 import numpy as np
 
 from ..errors import ArgumentError
+from .association import incident_faces
 from .body import BodyModel, lbs, shape_body
 from .features import attributes, coarse_features, detail_features, vertex_normals
 from .fit import FitModel, pair_distances
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
-from .postprocess import DEFAULT_MARGIN, nearest_body_points, push_out
+from .postprocess import DEFAULT_MARGIN, push_out_of_surface
 from .scene import Category
 from .skinning import SkinBinding, bind_worn, skin_garment
+from .smpl import JOINT_NAMES
 
-__all__ = ["GarmentPair", "BodyPatch", "body_patch", "body_under", "CONTACT_REACH", "PosedBody", "prepare_pair",
-           "pose_body", "coarse_model_features", "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn",
+__all__ = ["GarmentPair", "BodyPatch", "body_patch", "body_under", "swinging_parts", "SWINGING_JOINTS", "CONTACT_REACH",
+           "PosedBody", "prepare_pair", "pose_body", "coarse_model_features", "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn",
            "CoarseBase", "coarse_base_points"]
 
 #: A coarse model: ``(features (B, N, 7), graph) -> delta (B, N, 3) [m]``.
@@ -108,9 +110,13 @@ class BodyPatch:
     contact: np.ndarray
     """(V'',) int64 the body under the garment, indexing ``vertices``: the associated body
     vertices and every body vertex within :data:`CONTACT_REACH` of the rest garment, in the
-    T-pose or with the arms lowered (:func:`body_under`), each once. The post-process (and
+    T-pose or with the arms lowered (:func:`body_under`), and the arms, hands and thighs
+    (:func:`swinging_parts`), each once. The post-process (and
     the physics objective's nearest contact) looks here for the body point nearest to a
     garment vertex; their normals are exact."""
+    rings: np.ndarray
+    """(V', D) int64 the rows of ``faces`` around each of ``vertices``, padded with -1 (the
+    triangles the post-process measures a garment vertex against)."""
 
 
 def body_patch(body_faces: np.ndarray, assoc_vertex: np.ndarray, near: np.ndarray | None = None) -> BodyPatch:
@@ -127,8 +133,9 @@ def body_patch(body_faces: np.ndarray, assoc_vertex: np.ndarray, near: np.ndarra
     used[touched[touched < len(used)]] = True
     ring = faces[used[faces].any(axis=1)] if faces.size else faces
     vertices = np.union1d(np.unique(ring), touched)
-    return BodyPatch(vertices=vertices, faces=np.searchsorted(vertices, ring),
-                     assoc=np.searchsorted(vertices, assoc_vertex), contact=np.searchsorted(vertices, np.unique(touched)))
+    ring = np.searchsorted(vertices, ring)
+    return BodyPatch(vertices=vertices, faces=ring, assoc=np.searchsorted(vertices, assoc_vertex),
+                     contact=np.searchsorted(vertices, np.unique(touched)), rings=incident_faces(ring, vertices.size))
 
 
 #: Body vertices within this distance of the rest garment [m] count as the body under it
@@ -159,6 +166,19 @@ def body_under(v_shaped: np.ndarray, rest_points: np.ndarray, reach: float = CON
     if arms_down is not None:
         near |= np.isfinite(tree.query(np.asarray(arms_down, dtype=np.float64), distance_upper_bound=reach)[0])
     return np.flatnonzero(near).astype(np.int64)
+
+
+#: The joints whose vertices always count as the body under a garment (:func:`swinging_parts`):
+#: the arms and thighs swing against a garment in poses neither of :func:`body_under`'s
+#: reaches (the hands before the belly in a run, a thigh up into a shirt's hem in a kick).
+SWINGING_JOINTS = ("left_hip", "right_hip", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
+                   "left_wrist", "right_wrist", "left_hand", "right_hand")
+
+
+def swinging_parts(body: BodyModel) -> np.ndarray:
+    """(R,) int64 the body vertices skinned mostly to :data:`SWINGING_JOINTS` (the arms, hands and thighs)."""
+    joints = [JOINT_NAMES.index(name) for name in SWINGING_JOINTS]
+    return np.flatnonzero(np.isin(np.argmax(body.weights, axis=1), joints)).astype(np.int64)
 
 
 def _arms_down(body: BodyModel, v_shaped: np.ndarray, joints: np.ndarray) -> np.ndarray:
@@ -209,7 +229,8 @@ def prepare_pair(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray, fa
     d = pair_distances(rest_points, binding.association, v_shaped, fit.anchors)
     alpha = np.asarray(fit.transform(d), dtype=np.float64)
     patch = body_patch(body.faces, binding.association.vertex,
-                       body_under(v_shaped, rest_points, arms_down=_arms_down(body, v_shaped, joints)))
+                       np.union1d(body_under(v_shaped, rest_points, arms_down=_arms_down(body, v_shaped, joints)),
+                                  swinging_parts(body)))
     return GarmentPair(betas=betas, faces=faces, binding=binding, v_shaped=v_shaped, joints=joints,
                        graph=graph, alpha=alpha, patch=patch)
 
@@ -276,9 +297,9 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
 
     ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
     ``coarse_base``, as the coarse model was trained), ``M_detail = M_coarse + detail(...)``,
-    then the post-process (:func:`~cloth_usd.core.postprocess.push_out`, against the body
-    vertex under the garment (:attr:`BodyPatch.contact`) nearest to each garment vertex in
-    that frame: :func:`~cloth_usd.core.postprocess.nearest_body_points`).
+    then the post-process (:func:`~cloth_usd.core.postprocess.push_out_of_surface`, against
+    the body under the garment (:attr:`BodyPatch.contact`) nearest to each garment vertex in
+    that frame, and the surface there).
 
     Args:
         poses: (T, 72) axis-angle [rad]; transl: (T, 3) root translation [m].
@@ -319,7 +340,7 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
         if detail is not None:
             feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])
             m = m + detail(feats, attrs, pair.graph)
-        contact = pair.patch.contact
-        b, n = nearest_body_points(m, posed.patch_points[:, contact], posed.patch_normals[:, contact])
-        points[lo:hi], moved[lo:hi] = push_out(m, b, n, margin=margin)
+        points[lo:hi], moved[lo:hi] = push_out_of_surface(m, posed.patch_points, posed.patch_normals,
+                                                          pair.patch.faces, pair.patch.contact, margin=margin,
+                                                          rings=pair.patch.rings)
     return (points if frame is None else frame.to_world(points)), moved

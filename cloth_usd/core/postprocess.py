@@ -7,8 +7,13 @@ The body vertex is the one nearest to the garment vertex in that frame, among th
 under the garment (:func:`nearest_body_points`; the candidates are
 :attr:`~cloth_usd.core.pipeline.BodyPatch.contact`): a vertex that slid along the body, or
 a skirt swung into the other thigh, is measured against the body under it, not against the
-body vertex it was bound to at rest. Shape letters: T frames, N garment vertices, K
-candidate body vertices.
+body vertex it was bound to at rest. A tangent plane is the body's surface only near its
+vertex: where an arm lies against the torso, or the body folds (an armpit), a vertex in
+front of its nearest body vertex's plane can still be inside the body, so
+:func:`push_out_of_surface` then measures it against the surface itself (the closest point
+of the triangles around its nearest body vertices, and the normal interpolated there). Shape
+letters: T frames, N garment vertices, K candidate body vertices, V' the posed body vertices
+the candidates are taken from, M' their triangles.
 """
 
 from __future__ import annotations
@@ -16,9 +21,10 @@ from __future__ import annotations
 import numpy as np
 
 from ..errors import ArgumentError
+from .association import closest_point_on_triangles, incident_faces
 
-__all__ = ["push_out", "nearest_vertex", "nearest_body_points", "garment_margin", "DEFAULT_MARGIN", "LIMB_RADIUS",
-           "SEARCH_REACH"]
+__all__ = ["push_out", "push_out_of_surface", "nearest_vertex", "nearest_body_points", "garment_margin",
+           "DEFAULT_MARGIN", "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_REACH", "SURFACE_ROUNDS"]
 
 #: Default clearance from the body surface [m] (2 mm).
 DEFAULT_MARGIN = 0.002
@@ -104,6 +110,126 @@ def nearest_body_points(points: np.ndarray, body_points: np.ndarray, body_normal
     found = index < b.shape[1]
     rows, index = np.arange(p.shape[0])[:, None], np.where(found, index, 0)
     return b[rows, index], n[rows, index] * found[..., None]
+
+
+#: Body vertices nearest to a garment vertex whose tangent planes and triangles
+#: :func:`push_out_of_surface` tests it against.
+SURFACE_CANDIDATES = 4
+#: Times :func:`push_out_of_surface` measures a vertex it moved against the surface again:
+#: where an arm overlaps the torso, a vertex pushed out of one can land in the other.
+SURFACE_ROUNDS = 3
+#: :func:`push_out_of_surface` looks for a garment vertex's nearest body vertices within this
+#: distance [m], and for its nearest one alone out to ``reach``: a vertex with no body vertex
+#: this close lies in open space or deep in the body, where the nearest vertex's plane holds.
+SURFACE_REACH = 0.02
+
+
+def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normals: np.ndarray,
+                        body_faces: np.ndarray, candidates: np.ndarray, *, margin: float = DEFAULT_MARGIN,
+                        reach: float = SEARCH_REACH, neighbours: int = SURFACE_CANDIDATES,
+                        rounds: int = SURFACE_ROUNDS, rings: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The post-process: push garment vertices out of the body's surface, to ``margin`` in front of it.
+
+    Per frame, each garment vertex's ``neighbours`` nearest candidate body vertices (within
+    ``reach``) are found. The vertex is pushed in front of the nearest one's tangent plane
+    (:func:`push_out`); where it then still lies behind the tangent plane of another of them
+    (an arm against the torso, an armpit: places where a plane is not the surface), the
+    closest point of the triangles around those vertices is found and the vertex pushed out
+    along the normal interpolated there, to ``margin`` in front of the surface, and measured
+    again, up to ``rounds`` times.
+
+    Args:
+        points: (T, N, 3) garment points [m].
+        body_points: (T, V', 3) posed body vertices [m] (all of ``body_faces``' corners).
+        body_normals: (T, V', 3) their unit outward normals.
+        body_faces: (M', 3) int triangles over ``body_points``: every triangle around each
+            candidate.
+        candidates: (K,) int the vertices of ``body_points`` searched (the body under the
+            garment), K > 0.
+        margin: clearance [m] to keep in front of the body.
+        reach: a vertex further than this [m] from every candidate is left alone.
+        neighbours: candidate vertices tested per garment vertex.
+        rounds: surface tests of a vertex that moved, at most.
+        rings: (V', D) int the rows of ``body_faces`` around each body vertex, padded with -1
+            (:func:`~cloth_usd.core.association.incident_faces`); made here when None.
+    Returns:
+        ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the corrected points (a new
+        array; a non-finite vertex is left as it is, for the guard) and how many vertices
+        moved in each frame.
+    """
+    p = np.array(points, dtype=np.float64)
+    b = np.asarray(body_points, dtype=np.float64)
+    n = np.asarray(body_normals, dtype=np.float64)
+    faces = np.asarray(body_faces, dtype=np.int64)
+    cand = np.asarray(candidates, dtype=np.int64)
+    if p.ndim != 3 or p.shape[-1] != 3 or b.ndim != 3 or b.shape != n.shape or b.shape[0] != p.shape[0] \
+            or cand.ndim != 1 or cand.size == 0 or faces.ndim != 2 or faces.shape[1] != 3:
+        raise ArgumentError(f"points (T, N, 3), body_points and body_normals (T, V', 3), body_faces (M', 3) and "
+                            f"candidates (K,) with K > 0 expected, got {p.shape}, {b.shape}, {n.shape}, "
+                            f"{faces.shape}, {cand.shape}")
+    if not margin >= 0:
+        raise ArgumentError(f"margin must be >= 0 [m], got {margin}")
+    from scipy.spatial import cKDTree
+
+    k = max(1, min(int(neighbours), cand.size))
+    frames, rows, near = [], [], []
+    for t in range(p.shape[0]):  # the search per frame; the tests below over every frame at once
+        r = np.flatnonzero(np.isfinite(p[t]).all(axis=1))  # a non-finite vertex stays so (the guard catches it)
+        if r.size:
+            tree = cKDTree(b[t, cand])
+            index = tree.query(p[t, r], k=k, distance_upper_bound=min(reach, SURFACE_REACH))[1].reshape(r.size, k)
+            far = np.flatnonzero(index[:, 0] == cand.size)
+            if far.size and reach > SURFACE_REACH:  # the nearest alone, further out (a quarter of the search's cost)
+                index[far, 0] = tree.query(p[t, r[far]], k=1, distance_upper_bound=reach)[1]
+            keep = index[:, 0] < cand.size  # near the body at all
+            frames.append(np.full(np.count_nonzero(keep), t))
+            rows.append(r[keep])
+            near.append(index[keep])
+    moved = np.zeros(p.shape[0], dtype=np.int64)
+    if not frames:
+        return p, moved
+    frame, row, index = np.concatenate(frames), np.concatenate(rows), np.concatenate(near)
+    found = index < cand.size
+    near = cand[np.where(found, index, 0)]  # (R, k) indices into body_points
+    q, bp, bn = p[frame, row], b[frame[:, None], near], n[frame[:, None], near] * found[..., None]
+    s = np.einsum("rc,rc->r", q - bp[:, 0], bn[:, 0])
+    push = np.where(np.einsum("rc,rc->r", bn[:, 0], bn[:, 0]) > 0, np.maximum(margin - s, 0.0), 0.0)
+    q += push[:, None] * bn[:, 0]
+    hit = push > 0
+    check = np.flatnonzero((np.einsum("rkc,rkc->rk", q[:, None] - bp, bn) < 0.0).any(axis=1))
+    if check.size:
+        ring = incident_faces(faces, b.shape[1]) if rings is None else np.asarray(rings, dtype=np.int64)
+        for _ in range(max(int(rounds), 0)):
+            closest, normal = _closest_surface(q[check], frame[check], near[check], found[check], b, n, faces, ring)
+            s = np.einsum("rc,rc->r", q[check] - closest, normal)
+            out = (s < margin) & (np.einsum("rc,rc->r", normal, normal) > 0)
+            q[check[out]] += (margin - s[out])[:, None] * normal[out]
+            hit[check[out]] = True
+            check = check[out]
+            if not check.size:
+                break
+    p[frame, row] = q
+    np.add.at(moved, frame[hit], 1)
+    return p, moved
+
+
+def _closest_surface(q: np.ndarray, frame: np.ndarray, near: np.ndarray, found: np.ndarray, points: np.ndarray,
+                     normals: np.ndarray, faces: np.ndarray, ring: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each of ``q`` (R, 3)'s closest point on the triangles around its ``near`` (R, k) vertices
+    (where ``found``) of ``points`` (T, V', 3) in its ``frame`` (R,), and the unit normal
+    interpolated there from ``normals`` (T, V', 3) (zero where it cancels)."""
+    tri = np.where(found[..., None], ring[near], -1).reshape(q.shape[0], -1)  # (R, k * D), -1 padded
+    r, c = np.nonzero(tri >= 0)
+    corners = faces[tri[r, c]]
+    closest, bary = closest_point_on_triangles(points[frame[r][:, None], corners], q[r])
+    d2 = np.full(tri.shape, np.inf)
+    d2[r, c] = np.einsum("ic,ic->i", closest - q[r], closest - q[r])
+    slot = np.full(tri.shape, -1, dtype=np.int64)
+    slot[r, c] = np.arange(r.size)
+    pick = slot[np.arange(q.shape[0]), np.argmin(d2, axis=1)]
+    normal = np.einsum("ik,ikc->ic", bary[pick], normals[frame[:, None], corners[pick]])
+    length = np.linalg.norm(normal, axis=1, keepdims=True)
+    return closest[pick], np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
 
 
 def garment_margin(rest_points: np.ndarray, faces: np.ndarray, *, base: float = DEFAULT_MARGIN,

@@ -55,7 +55,7 @@ def test_posed_patch_matches_the_whole_posed_body():
 def test_coarse_base_adds_the_displacement_to_the_body_or_the_skinned_garment():
     """A zero displacement gives I M_b (METHOD.md's base) or exactly the skinning tier."""
     from cloth_usd.core.pipeline import CoarseBase, run_tiers
-    from cloth_usd.core.postprocess import push_out
+    from cloth_usd.core.postprocess import push_out_of_surface
     from cloth_usd.core.skinning import skin_garment
 
     body = load_body_model()
@@ -71,7 +71,8 @@ def test_coarse_base_adds_the_displacement_to_the_body_or_the_skinned_garment():
     for base, want in ((CoarseBase.BODY, posed.garment_points),
                        ("skinned", skin_garment(pair.binding, poses, transl, body.parents))):
         got, moved = run_tiers(body, pair, poses, transl, zero, batch_size=2, coarse_base=base)
-        expect, expect_moved = push_out(want, posed.garment_points, posed.garment_normals)
+        expect, expect_moved = push_out_of_surface(want, posed.patch_points, posed.patch_normals, pair.patch.faces,
+                                                   pair.patch.contact)
         np.testing.assert_allclose(got, expect, atol=1e-12)
         np.testing.assert_array_equal(moved, expect_moved)
     with pytest.raises(ValueError):
@@ -95,3 +96,22 @@ def test_the_body_under_a_shirt_includes_the_inner_arms_that_hang_against_it():
     assert set(t_pose) <= set(lowered)
     assert upper_arm[t_pose].sum() < upper_arm[lowered].sum()
     assert upper_arm[lowered].sum() > 0.1 * upper_arm.sum()
+
+
+def test_the_body_under_any_garment_includes_the_arms_hands_and_thighs():
+    """A hand swung before the belly (a run) meets a shirt where neither the T-pose nor the
+    lowered arms put it: the post-process searches the arms, hands and thighs for every garment."""
+    from cloth_usd.core.pipeline import SWINGING_JOINTS, swinging_parts
+    from cloth_usd.core.smpl import JOINT_NAMES
+
+    body = load_body_model()
+    rest, faces = make_tshirt(body, np.zeros(10), TShirtParams(target_vertices=600))
+    pair = prepare_pair(body, np.zeros(10), rest, faces, find_bundle("tshirt").fit)
+    owner = np.argmax(body.weights, axis=1)
+    hands = np.flatnonzero(np.isin(owner, [JOINT_NAMES.index("left_hand"), JOINT_NAMES.index("right_hand")]))
+    contact = pair.patch.vertices[pair.patch.contact]
+    assert set(hands) <= set(swinging_parts(body)) <= set(contact)
+    assert {JOINT_NAMES[j] for j in owner[swinging_parts(body)]} == set(SWINGING_JOINTS)
+    # every triangle around a searched vertex is in the patch, so its normal is the whole body's
+    assert (pair.patch.rings[pair.patch.contact] >= 0).sum() == np.isin(
+        body.faces, contact).sum()

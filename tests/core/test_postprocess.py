@@ -98,3 +98,63 @@ def test_a_non_finite_vertex_is_left_for_the_guard():
     np.testing.assert_array_equal(b[0, 1], cloud[0, 1])
     out, _ = push_out(points, b, n)
     assert np.isnan(out[0, 0]).any() and np.isfinite(out[0, 1]).all()
+
+
+def _corner():
+    """An L-shaped body, ``{z < 0} or {x > 0}``: a floor (z = 0, x <= 0) meeting a wall
+    (x = 0, z >= 0) in a concave corner, as an arm lying against the torso meets it; 1 cm
+    vertex spacing. Returns ``(points (V, 3), faces (M, 3), normals (V, 3))``."""
+    from cloth_usd.core.features import vertex_normals
+
+    path = [(-0.03, 0.0), (-0.02, 0.0), (-0.01, 0.0), (0.0, 0.0), (0.0, 0.01), (0.0, 0.02), (0.0, 0.03)]  # (x, z)
+    ys = (-0.01, 0.0, 0.01)
+    pts = np.array([[x, y, z] for y in ys for x, z in path])
+    m = len(path)
+    faces = np.array([f for j in range(len(ys) - 1) for i in range(m - 1)
+                      for f in ((j * m + i, j * m + i + 1, (j + 1) * m + i),
+                                (j * m + i + 1, (j + 1) * m + i + 1, (j + 1) * m + i))])
+    return pts, faces, vertex_normals(pts, faces)
+
+
+def _outside(p):
+    """Distance [m] of points outside :func:`_corner`'s body, negative inside."""
+    x, z = p[..., 0], p[..., 2]
+    return np.where((x <= 0) & (z >= 0), np.minimum(-x, z), -np.maximum(x, 0) - np.maximum(-z, 0))
+
+
+def test_a_vertex_in_front_of_its_nearest_body_vertex_but_inside_the_body_is_pushed_out_of_the_surface():
+    from cloth_usd.core.postprocess import nearest_body_points, push_out_of_surface
+
+    pts, faces, normals = _corner()
+    assert normals[1] @ [0, 0, 1] == pytest.approx(1) and normals[5] @ [-1, 0, 0] == pytest.approx(1)
+    garment = np.array([[[0.0005, 0.0, -0.004],    # 4 mm inside the floor, nearest to the corner vertex
+                         [-0.015, 0.0, 0.01],      # in the open, 1 cm off both
+                         [-0.02, 0.0, -0.003]]])   # 3 mm inside the floor, away from the corner
+    # against the nearest vertex's plane alone the first stays inside: the corner's normal is tilted
+    old, _ = push_out(garment, *nearest_body_points(garment, pts[None], normals[None]))
+    assert _outside(old[0, 0]) < -1e-4
+    out, moved = push_out_of_surface(garment, pts[None], normals[None], faces, np.arange(len(pts)), margin=0.002)
+    assert _outside(out[0, 0]) > 0.0015  # out, near the margin in front of the floor
+    np.testing.assert_array_equal(out[0, 1], garment[0, 1])
+    np.testing.assert_allclose(out[0, 2], [-0.02, 0.0, 0.002], atol=1e-12)  # a plane: as push_out
+    assert moved.tolist() == [2]
+    assert garment[0, 0, 2] == -0.004  # the input is left alone
+
+
+def test_the_surface_push_leaves_far_and_non_finite_vertices_and_checks_its_arguments():
+    from cloth_usd.core.postprocess import push_out_of_surface
+
+    pts, faces, normals = _corner()
+    garment = np.array([[[np.nan, 0.0, 0.0], [-0.015, 0.0, 0.2], [-0.02, 0.0, -0.003]]])
+    out, moved = push_out_of_surface(garment, pts[None], normals[None], faces, np.arange(len(pts)), reach=0.05)
+    np.testing.assert_array_equal(out[0, 0], garment[0, 0])  # left for the guard
+    np.testing.assert_array_equal(out[0, 1], garment[0, 1])  # 20 cm off: not near the body
+    assert moved.tolist() == [1]
+    only_floor = np.flatnonzero(pts[:, 2] == 0.0)
+    wall = np.array([[[0.003, 0.0, 0.02]]])  # 3 mm inside the wall, 2 cm above the floor
+    inside_wall, _ = push_out_of_surface(wall, pts[None], normals[None], faces, np.arange(len(pts)))
+    assert _outside(inside_wall[0, 0]) == pytest.approx(0.002, abs=1e-9)
+    with pytest.raises(ArgumentError, match="candidates"):
+        push_out_of_surface(garment, pts[None], normals[None], faces, only_floor[:0])
+    with pytest.raises(ArgumentError, match="margin"):
+        push_out_of_surface(garment, pts[None], normals[None], faces, only_floor, margin=-0.001)
