@@ -130,8 +130,8 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
                         rounds: int = SURFACE_ROUNDS, rings: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The post-process: push garment vertices out of the body's surface, to ``margin`` in front of it.
 
-    Per frame, each garment vertex's ``neighbours`` nearest candidate body vertices (within
-    ``reach``) are found. The vertex is pushed in front of the nearest one's tangent plane
+    Per frame, each garment vertex's ``neighbours`` nearest candidate body vertices are found
+    (within :data:`SURFACE_REACH`; the nearest alone out to ``reach``). The vertex is pushed in front of the nearest one's tangent plane
     (:func:`push_out`); where it then still lies behind the tangent plane of another of them
     (an arm against the torso, an armpit: places where a plane is not the surface), the
     closest point of the triangles around those vertices is found and the vertex pushed out
@@ -149,7 +149,7 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
         margin: clearance [m] to keep in front of the body.
         reach: a vertex further than this [m] from every candidate is left alone.
         neighbours: candidate vertices tested per garment vertex.
-        rounds: surface tests of a vertex that moved, at most.
+        rounds: surface tests of a vertex, at most (one the test moved is tested again).
         rings: (V', D) int the rows of ``body_faces`` around each body vertex, padded with -1
             (:func:`~cloth_usd.core.association.incident_faces`); made here when None.
     Returns:
