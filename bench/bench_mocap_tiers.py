@@ -11,9 +11,11 @@ detail tier. Per bake, over every frame of the clip:
   garment's, then the median frame's p99 (p50 col.), the worst frame's p99 and the largest
   edge of all; the same against the skinned shirt of that frame (skinning stretches too);
 - offset: the largest vertex distance from the skinned shirt [mm];
-- penetration: the post-process's count of vertices it pushed out (per frame, before), and
-  the fraction of vertices inside the posed body after it (the full SMPL mesh), and of those
-  deeper than 1 mm;
+- penetration: the fraction of vertices inside the posed body (the full SMPL mesh), and of
+  those deeper than 1 mm, before the post-process (the models' garment as they made it,
+  evaluated again here with ``LearnedGarment.evaluate(..., postprocess=False)``) and after it
+  (the baked cache), on every fifth frame; and the post-process's count of the vertices it
+  moved per frame;
 - bending: the dihedral bending energy of the material (``nn.physics``; needs torch) [J].
 
 Writes ``OUT/mocap_tiers.md`` (also printed) and ``OUT/mocap_tiers.json``.
@@ -34,8 +36,10 @@ import numpy as np
 from pxr import Sdf
 
 from cloth_usd.core.body import load_body_model, posed_vertices, shape_body
+from cloth_usd.core.frames import canonical_motion
 from cloth_usd.datagen.simulate import body_side, unique_edges
-from cloth_usd.runtime.bundle import find_bundle
+from cloth_usd.runtime.bundle import find_bundle, load_bundle
+from cloth_usd.runtime.garment import LearnedGarment
 from cloth_usd.usd.read import open_stage, read_motion, read_scene
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -108,7 +112,7 @@ def main(argv=None) -> int:
     rest, faces = garment.rest_points, garment.triangles
     edges = unique_edges(faces)
     energy = _bending(rest, faces)
-    rows = []
+    rows, bundle_paths = [], {}
     for clip in args.clip:
         name, *frames = clip.split(":")
         label = Path(name).stem
@@ -121,18 +125,22 @@ def main(argv=None) -> int:
         skinned, times, _ = _points(skin_cache)
         poses = _stage_poses(shot, times)
         bodies = posed_vertices(body, poses["betas"], poses["poses"], poses["transl"])
+        sampled = np.arange(0, len(times), 5)
         runs = [("skinning", None, skin_cache)]
         for bundle in bundles:
             for tier in ("coarse", "detail"):
                 cache = out / f"{label}.{Path(bundle).name}.{tier}.usdc"
                 _run("bake", str(shot), "-o", str(cache), "--tier", tier, "--models", bundle, "--force")
                 runs.append((tier, Path(bundle).name, cache))
+                bundle_paths[Path(bundle).name] = bundle
         for tier, bundle, cache in runs:
             pts, _, prov = _points(cache)
             report = _garment_report(prov)
             vs_rest, vs_skin = _stretch(pts, rest, edges), _stretch(pts, skinned, edges)
             p99_rest, p99_skin = np.percentile(vs_rest, 99, axis=1), np.percentile(vs_skin, 99, axis=1)
-            inside, deep = np.array([_inside(pts[t], bodies[t], body.faces) for t in range(0, len(times), 5)]).T
+            inside, deep = np.array([_inside(pts[t], bodies[t], body.faces) for t in sampled]).T
+            before = (inside, deep) if bundle is None else _before(Path(bundle_paths[bundle]), body, poses, tier, sampled,
+                                                                   bodies)
             row = {"clip": label, "frames": len(times), "bundle": bundle or "-", "tier": tier,
                    "fallback_coarse": int(report.get("fallback_coarse", 0)),
                    "fallback_skinning": int(report.get("fallback_skinning", 0)),
@@ -142,20 +150,23 @@ def main(argv=None) -> int:
                    "stretch_skin_max": float(vs_skin.max()),
                    "offset_max_mm": float(np.linalg.norm(pts - skinned, axis=-1).max() * 1e3),
                    "postprocess_moved_per_frame": float(report.get("postprocess_moved", 0)) / max(len(times), 1),
+                   "inside_before": float(np.mean(before[0])), "inside_1mm_before": float(np.mean(before[1])),
                    "inside_after": float(np.mean(inside)), "inside_1mm_after": float(np.mean(deep)),
                    "bending_j": float(np.mean([energy(p) for p in pts[::5]])) if energy else float("nan")}
             rows.append(row)
             print(json.dumps(row), flush=True)
     (out / "mocap_tiers.json").write_text(json.dumps(rows, indent=1))
     lines = ["| clip | frames | bundle | tier | guard: coarse / skinning | stretch vs rest p99 median / worst, max "
-             "| vs skinning p99 median / worst, max | offset max mm | post-process moved / frame | inside after "
-             "(deeper than 1 mm) | bending J |", "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|"]
+             "| vs skinning p99 median / worst, max | offset max mm | post-process moved / frame | inside before "
+             "(deeper than 1 mm) | inside after (deeper than 1 mm) | bending J |",
+             "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['clip']} | {r['frames']} | {r['bundle']} | {r['tier']} | {r['fallback_coarse']} / "
                      f"{r['fallback_skinning']} | {r['stretch_rest_p99_median']:.2f} / {r['stretch_rest_p99_worst']:.2f}, "
                      f"{r['stretch_rest_max']:.2f} | {r['stretch_skin_p99_median']:.2f} / "
                      f"{r['stretch_skin_p99_worst']:.2f}, {r['stretch_skin_max']:.2f} | {r['offset_max_mm']:.0f} | "
-                     f"{r['postprocess_moved_per_frame']:.0f} | {100 * r['inside_after']:.2f}% ({100 * r['inside_1mm_after']:.2f}%) | "
+                     f"{r['postprocess_moved_per_frame']:.0f} | {100 * r['inside_before']:.2f}% "
+                     f"({100 * r['inside_1mm_before']:.2f}%) | {100 * r['inside_after']:.2f}% ({100 * r['inside_1mm_after']:.2f}%) | "
                      f"{r['bending_j']:.2e} |")
     text = "\n".join(lines) + "\n"
     (out / "mocap_tiers.md").write_text(text)
@@ -164,12 +175,26 @@ def main(argv=None) -> int:
 
 
 def _stage_poses(shot: Path, times: np.ndarray) -> dict:
-    """The shot's SMPL poses, root translations and betas at ``times``, read as the baker reads them."""
+    """The shot's SMPL poses, root translations and betas at ``times``, read as the baker reads
+    them, and its garment's rest points (in the body's frame, as the baker takes them) and triangles."""
     stage = open_stage(shot)
-    character = read_scene(stage).characters[0]
+    scene = read_scene(stage)
+    character, garment = scene.characters[0], scene.garments[0]
     motion = read_motion(stage, character, times)
-    root = shape_body(load_body_model(), character.betas)[1][0]
-    return {"poses": motion.poses, "transl": motion.root_position - root, "betas": character.betas}
+    joints = shape_body(load_body_model(), character.betas)[1]
+    canonical = canonical_motion(character, motion, joints)  # what the bake hands the models
+    return {"poses": motion.poses, "transl": motion.root_position - joints[0], "betas": character.betas,
+            "model_poses": canonical.poses, "model_transl": canonical.transl,
+            "rest": canonical.rest_points(garment.rest_points), "faces": garment.triangles}
+
+
+def _before(bundle: Path, body, poses: dict, tier: str, sampled: np.ndarray, bodies: np.ndarray) -> tuple:
+    """The fractions inside the body and deeper than 1 mm (:func:`_inside`) of the ``tier``
+    garment of ``bundle`` before the post-process, at the ``sampled`` frames: the models run
+    again as the bake runs them, with the post-process left out."""
+    learned = LearnedGarment(load_bundle(bundle), body, poses["betas"], poses["rest"], poses["faces"])
+    raw = learned.evaluate(tier, poses["model_poses"][sampled], poses["model_transl"][sampled], postprocess=False).points
+    return tuple(np.array([_inside(raw[i], bodies[t], body.faces) for i, t in enumerate(sampled)]).T)
 
 
 def _bending(rest: np.ndarray, faces: np.ndarray):

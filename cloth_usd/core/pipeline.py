@@ -292,7 +292,7 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
               coarse: CoarseFn, detail: DetailFn | None = None, *, batch_size: int = 16,
               margin: float = DEFAULT_MARGIN, coarse_base: CoarseBase | str = CoarseBase.BODY,
               heading: Heading | str = Heading.WORLD,
-              skinned: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+              skinned: np.ndarray | None = None, postprocess: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Animate a garment with a coarse model and, if given, a detail model.
 
     ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
@@ -312,6 +312,8 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
             caller has it already (the baker's guard needs it too): the skinned coarse base
             is then taken from it, turned into the canonical heading where the models see
             one, instead of skinning every frame again. Unused with a body base.
+        postprocess: False leaves the models' garment as they made it (what the post-process
+            starts from: how far into the body they put it); ``moved`` is then all zero.
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the garment per frame and
         how many vertices the post-process moved in each.
@@ -340,7 +342,10 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
         if detail is not None:
             feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])
             m = m + detail(feats, attrs, pair.graph)
-        points[lo:hi], moved[lo:hi] = push_out_of_surface(m, posed.patch_points, posed.patch_normals,
-                                                          pair.patch.faces, pair.patch.contact, margin=margin,
-                                                          rings=pair.patch.rings)
+        if postprocess:
+            points[lo:hi], moved[lo:hi] = push_out_of_surface(m, posed.patch_points, posed.patch_normals,
+                                                              pair.patch.faces, pair.patch.contact, margin=margin,
+                                                              rings=pair.patch.rings)
+        else:
+            points[lo:hi] = m
     return (points if frame is None else frame.to_world(points)), moved

@@ -176,7 +176,7 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     for t in range(p.shape[0]):  # the search per frame; the tests below over every frame at once
         r = np.flatnonzero(np.isfinite(p[t]).all(axis=1))  # a non-finite vertex stays so (the guard catches it)
         if r.size:
-            tree = cKDTree(b[t, cand])
+            tree = cKDTree(b[t, cand], leafsize=32, balanced_tree=False, compact_nodes=False)  # 1/5 faster here
             index = tree.query(p[t, r], k=k, distance_upper_bound=min(reach, SURFACE_REACH))[1].reshape(r.size, k)
             far = np.flatnonzero(index[:, 0] == cand.size)
             if far.size and reach > SURFACE_REACH:  # the nearest alone, further out (a quarter of the search's cost)
@@ -191,7 +191,9 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     frame, row, index = np.concatenate(frames), np.concatenate(rows), np.concatenate(near)
     found = index < cand.size
     near = cand[np.where(found, index, 0)]  # (R, k) indices into body_points
-    q, bp, bn = p[frame, row], b[frame[:, None], near], n[frame[:, None], near] * found[..., None]
+    flat_b, flat_n = b.reshape(-1, 3), n.reshape(-1, 3)  # indexed by frame * V' + vertex: one gather, not two
+    near = near + (frame * b.shape[1])[:, None]
+    q, bp, bn = p[frame, row], flat_b[near], flat_n[near] * found[..., None]
     s = np.einsum("rc,rc->r", q - bp[:, 0], bn[:, 0])
     push = np.where(np.einsum("rc,rc->r", bn[:, 0], bn[:, 0]) > 0, np.maximum(margin - s, 0.0), 0.0)
     q += push[:, None] * bn[:, 0]
@@ -200,7 +202,8 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     if check.size:
         ring = incident_faces(faces, b.shape[1]) if rings is None else np.asarray(rings, dtype=np.int64)
         for _ in range(max(int(rounds), 0)):
-            closest, normal = _closest_surface(q[check], frame[check], near[check], found[check], b, n, faces, ring)
+            closest, normal = _closest_surface(q[check], frame[check] * b.shape[1], near[check] % b.shape[1],
+                                               found[check], flat_b, flat_n, faces, ring)
             s = np.einsum("rc,rc->r", q[check] - closest, normal)
             out = (s < margin) & (np.einsum("rc,rc->r", normal, normal) > 0)
             q[check[out]] += (margin - s[out])[:, None] * normal[out]
@@ -213,21 +216,22 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     return p, moved
 
 
-def _closest_surface(q: np.ndarray, frame: np.ndarray, near: np.ndarray, found: np.ndarray, points: np.ndarray,
+def _closest_surface(q: np.ndarray, offset: np.ndarray, near: np.ndarray, found: np.ndarray, points: np.ndarray,
                      normals: np.ndarray, faces: np.ndarray, ring: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Each of ``q`` (R, 3)'s closest point on the triangles around its ``near`` (R, k) vertices
-    (where ``found``) of ``points`` (T, V', 3) in its ``frame`` (R,), and the unit normal
-    interpolated there from ``normals`` (T, V', 3) (zero where it cancels)."""
+    (where ``found``) of its frame, and the unit normal interpolated there (zero where it
+    cancels). ``points`` and ``normals`` are (T * V', 3), a frame's vertex ``v`` at ``offset + v``
+    (``offset`` (R,) its frame times V')."""
     tri = np.where(found[..., None], ring[near], -1).reshape(q.shape[0], -1)  # (R, k * D), -1 padded
     r, c = np.nonzero(tri >= 0)
-    corners = faces[tri[r, c]]
-    closest, bary = closest_point_on_triangles(points[frame[r][:, None], corners], q[r])
+    corners = faces[tri[r, c]] + offset[r][:, None]
+    closest, bary = closest_point_on_triangles(points[corners], q[r])
     d2 = np.full(tri.shape, np.inf)
     d2[r, c] = np.einsum("ic,ic->i", closest - q[r], closest - q[r])
     slot = np.full(tri.shape, -1, dtype=np.int64)
     slot[r, c] = np.arange(r.size)
     pick = slot[np.arange(q.shape[0]), np.argmin(d2, axis=1)]
-    normal = np.einsum("ik,ikc->ic", bary[pick], normals[frame[:, None], corners[pick]])
+    normal = np.einsum("ik,ikc->ic", bary[pick], normals[corners[pick]])
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     return closest[pick], np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
 

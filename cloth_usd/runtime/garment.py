@@ -84,7 +84,7 @@ class LearnedGarment:
         return self.graph.num_vertices
 
     def evaluate(self, tier: Tier | str, poses: np.ndarray, transl: np.ndarray, *,
-                 batch_size: int = 16, skinned: np.ndarray | None = None) -> LearnedFrames:
+                 batch_size: int = 16, skinned: np.ndarray | None = None, postprocess: bool = True) -> LearnedFrames:
         """Animate the garment.
 
         Args:
@@ -96,6 +96,8 @@ class LearnedGarment:
                 world frame (:func:`~cloth_usd.core.skinning.skin_garment` with
                 :attr:`binding`), when the caller has it already: a bundle whose coarse
                 base is the skinned garment then does not skin the frames again.
+            postprocess: False returns the models' garment before the post-process (to
+                measure how far into the body they put it); a bake always runs it.
         Returns:
             The garment points per frame and the post-process counts.
         """
@@ -121,5 +123,5 @@ class LearnedGarment:
         points, moved = run_tiers(self.body, self.pair, poses, transl, run_coarse,
                                   run_detail if detail is not None else None, batch_size=batch_size,
                                   margin=self.margin, coarse_base=self.bundle.coarse_base,
-                                  heading=self.bundle.heading, skinned=skinned)
+                                  heading=self.bundle.heading, skinned=skinned, postprocess=postprocess)
         return LearnedFrames(points=points, moved=moved)

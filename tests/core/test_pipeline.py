@@ -75,6 +75,11 @@ def test_coarse_base_adds_the_displacement_to_the_body_or_the_skinned_garment():
                                                    pair.patch.contact)
         np.testing.assert_allclose(got, expect, atol=1e-12)
         np.testing.assert_array_equal(moved, expect_moved)
+        if base is CoarseBase.BODY:  # the body itself lies within the margin: every vertex is pushed
+            assert (expect_moved == want.shape[1]).all()
+        raw, none = run_tiers(body, pair, poses, transl, zero, batch_size=2, coarse_base=base, postprocess=False)
+        np.testing.assert_allclose(raw, want, atol=1e-12)  # the models' garment as they made it
+        assert not none.any()
     with pytest.raises(ValueError):
         run_tiers(body, pair, poses, transl, zero, coarse_base="hips")
 
