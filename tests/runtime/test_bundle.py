@@ -142,7 +142,7 @@ def test_the_shipped_tshirt_bundle_verifies_and_records_its_evaluation():
     from cloth_usd.runtime.bundle import default_bundle_dir, find_bundle
 
     bundle = find_bundle("tshirt")
-    assert bundle is not None and bundle.path.parent == default_bundle_dir() and bundle.name == "tshirt-v4"
+    assert bundle is not None and bundle.path.parent == default_bundle_dir() and bundle.name == "tshirt-v5"
     assert bundle.heading.value == "canonical"
     evaluation = json.loads((bundle.path / "manifest.json").read_text())["metrics"]["evaluation"]
     assert evaluation["same_models"] is True and evaluation["rows"]  # measured on these very ONNX files
