@@ -112,7 +112,7 @@ def main(argv=None) -> int:
     rest, faces = garment.rest_points, garment.triangles
     edges = unique_edges(faces)
     energy = _bending(rest, faces)
-    rows, bundle_paths = [], {}
+    rows = []
     for clip in args.clip:
         name, *frames = clip.split(":")
         label = Path(name).stem
@@ -123,7 +123,7 @@ def main(argv=None) -> int:
         skin_cache = out / f"{label}.skinning.usdc"
         _run("bake", str(shot), "-o", str(skin_cache), "--tier", "skinning", "--force")
         skinned, times, _ = _points(skin_cache)
-        poses = _stage_poses(shot, times)
+        poses = _stage_poses(shot, times, body)
         bodies = posed_vertices(body, poses["betas"], poses["poses"], poses["transl"])
         sampled = np.arange(0, len(times), 5)
         runs = [("skinning", None, skin_cache)]
@@ -131,17 +131,17 @@ def main(argv=None) -> int:
             for tier in ("coarse", "detail"):
                 cache = out / f"{label}.{Path(bundle).name}.{tier}.usdc"
                 _run("bake", str(shot), "-o", str(cache), "--tier", tier, "--models", bundle, "--force")
-                runs.append((tier, Path(bundle).name, cache))
-                bundle_paths[Path(bundle).name] = bundle
+                runs.append((tier, bundle, cache))
+        learned = {bundle: LearnedGarment(load_bundle(Path(bundle)), body, poses["betas"], poses["rest"], poses["faces"])
+                   for bundle in bundles}  # one per bundle and clip: both tiers run it again before the post-process
         for tier, bundle, cache in runs:
             pts, _, prov = _points(cache)
             report = _garment_report(prov)
             vs_rest, vs_skin = _stretch(pts, rest, edges), _stretch(pts, skinned, edges)
             p99_rest, p99_skin = np.percentile(vs_rest, 99, axis=1), np.percentile(vs_skin, 99, axis=1)
             inside, deep = np.array([_inside(pts[t], bodies[t], body.faces) for t in sampled]).T
-            before = (inside, deep) if bundle is None else _before(Path(bundle_paths[bundle]), body, poses, tier, sampled,
-                                                                   bodies)
-            row = {"clip": label, "frames": len(times), "bundle": bundle or "-", "tier": tier,
+            before = (inside, deep) if bundle is None else _before(learned[bundle], body, poses, tier, sampled, bodies)
+            row = {"clip": label, "frames": len(times), "bundle": Path(bundle).name if bundle else "-", "tier": tier,
                    "fallback_coarse": int(report.get("fallback_coarse", 0)),
                    "fallback_skinning": int(report.get("fallback_skinning", 0)),
                    "stretch_rest_p99_median": float(np.median(p99_rest)), "stretch_rest_p99_worst": float(p99_rest.max()),
@@ -174,25 +174,24 @@ def main(argv=None) -> int:
     return 0
 
 
-def _stage_poses(shot: Path, times: np.ndarray) -> dict:
+def _stage_poses(shot: Path, times: np.ndarray, body) -> dict:
     """The shot's SMPL poses, root translations and betas at ``times``, read as the baker reads
     them, and its garment's rest points (in the body's frame, as the baker takes them) and triangles."""
     stage = open_stage(shot)
     scene = read_scene(stage)
     character, garment = scene.characters[0], scene.garments[0]
     motion = read_motion(stage, character, times)
-    joints = shape_body(load_body_model(), character.betas)[1]
+    joints = shape_body(body, character.betas)[1]
     canonical = canonical_motion(character, motion, joints)  # what the bake hands the models
     return {"poses": motion.poses, "transl": motion.root_position - joints[0], "betas": character.betas,
             "model_poses": canonical.poses, "model_transl": canonical.transl,
             "rest": canonical.rest_points(garment.rest_points), "faces": garment.triangles}
 
 
-def _before(bundle: Path, body, poses: dict, tier: str, sampled: np.ndarray, bodies: np.ndarray) -> tuple:
+def _before(learned: LearnedGarment, body, poses: dict, tier: str, sampled: np.ndarray, bodies: np.ndarray) -> tuple:
     """The fractions inside the body and deeper than 1 mm (:func:`_inside`) of the ``tier``
-    garment of ``bundle`` before the post-process, at the ``sampled`` frames: the models run
-    again as the bake runs them, with the post-process left out."""
-    learned = LearnedGarment(load_bundle(bundle), body, poses["betas"], poses["rest"], poses["faces"])
+    garment of ``learned`` (the shot's garment on its bundle) before the post-process, at the
+    ``sampled`` frames: the models run again as the bake runs them, with the post-process left out."""
     raw = learned.evaluate(tier, poses["model_poses"][sampled], poses["model_transl"][sampled], postprocess=False).points
     return tuple(np.array([_inside(raw[i], bodies[t], body.faces) for i, t in enumerate(sampled)]).T)
 

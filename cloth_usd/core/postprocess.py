@@ -192,8 +192,9 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     found = index < cand.size
     near = cand[np.where(found, index, 0)]  # (R, k) indices into body_points
     flat_b, flat_n = b.reshape(-1, 3), n.reshape(-1, 3)  # indexed by frame * V' + vertex: one gather, not two
-    near = near + (frame * b.shape[1])[:, None]
-    q, bp, bn = p[frame, row], flat_b[near], flat_n[near] * found[..., None]
+    offset = frame * b.shape[1]
+    flat = near + offset[:, None]
+    q, bp, bn = p[frame, row], flat_b[flat], flat_n[flat] * found[..., None]
     s = np.einsum("rc,rc->r", q - bp[:, 0], bn[:, 0])
     push = np.where(np.einsum("rc,rc->r", bn[:, 0], bn[:, 0]) > 0, np.maximum(margin - s, 0.0), 0.0)
     q += push[:, None] * bn[:, 0]
@@ -202,8 +203,8 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     if check.size:
         ring = incident_faces(faces, b.shape[1]) if rings is None else np.asarray(rings, dtype=np.int64)
         for _ in range(max(int(rounds), 0)):
-            closest, normal = _closest_surface(q[check], frame[check] * b.shape[1], near[check] % b.shape[1],
-                                               found[check], flat_b, flat_n, faces, ring)
+            closest, normal = _closest_surface(q[check], offset[check], near[check], found[check], flat_b, flat_n,
+                                               faces, ring)
             s = np.einsum("rc,rc->r", q[check] - closest, normal)
             out = (s < margin) & (np.einsum("rc,rc->r", normal, normal) > 0)
             q[check[out]] += (margin - s[out])[:, None] * normal[out]
