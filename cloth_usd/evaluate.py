@@ -31,7 +31,7 @@ import numpy as np
 
 from .core.body import BodyModel
 from .core.heading import Heading
-from .core.pipeline import CoarseBase, run_tiers
+from .core.pipeline import CoarseBase, CoarseFeatures, run_tiers
 from .core.skinning import skin_garment
 from .datagen.floor import floor_report
 from .errors import ArgumentError
@@ -197,7 +197,8 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         log.warning("%s: the bundle was trained on another data set (manifest sha256 %s...)", data_dir,
                     str(trained_on)[:12])
     shipped_coarse = _session_coarse_fn(bundle_obj.session("coarse"))
-    runs: list[tuple[str, tuple, CoarseBase, Heading]] = []  # (label, models for run_tiers, their base, heading)
+    # (label, models for run_tiers, their base, heading and coarse features)
+    runs: list[tuple[str, tuple, CoarseBase, Heading, CoarseFeatures]] = []
     ablations: dict[str, dict] = {}
     if ablation_runs:
         from .nn.inference import pick_device, torch_coarse_fn, torch_detail_fn
@@ -221,9 +222,10 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
             ablations[label] = record
             if run.tier.value == "detail":  # on the bundle's coarse model
                 runs.append((label, (shipped_coarse, torch_detail_fn(run.model, dev)), bundle_obj.coarse_base,
-                             bundle_obj.heading))
+                             bundle_obj.heading, bundle_obj.coarse_features))
             else:
-                runs.append((label, (torch_coarse_fn(run.model, dev),), run.config.coarse_base, run.config.heading))
+                runs.append((label, (torch_coarse_fn(run.model, dev),), run.config.coarse_base, run.config.heading,
+                             run.config.coarse_features))
     tiers = ["skinning", "coarse"] + (["detail"] if "detail" in [t.value for t in bundle_obj.tiers] else []) \
         + [label for label, *_ in runs]
     test_garment = [c.meta for c in clips if c.split.value == "test_garment"]
@@ -251,9 +253,10 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         for tier in ("coarse", "detail"):
             if tier in tiers:
                 outputs[tier] = learned.evaluate(tier, clip.poses, clip.transl, batch_size=batch_size).points
-        for label_, models, base, heading in runs:
+        for label_, models, base, heading, features in runs:
             outputs[label_] = run_tiers(body, learned.pair, clip.poses, clip.transl, *models, batch_size=batch_size,
-                                        margin=learned.margin, coarse_base=base, heading=heading)[0]
+                                        margin=learned.margin, coarse_base=base, heading=heading,
+                                        coarse_features=features)[0]
         for tier, pts in outputs.items():
             err = np.linalg.norm(pts - truth, axis=-1) * 1000.0
             for key, _ in keys:
@@ -275,7 +278,7 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         "format": REPORT_FORMAT,
         "bundle": {"path": str(Path(bundle).resolve()), "name": bundle_obj.name, "sha256": bundle_obj.sha256,
                    "files": dict(bundle_obj.manifest["files"]), "coarse_base": bundle_obj.coarse_base.value,
-                   "heading": bundle_obj.heading.value},
+                   "heading": bundle_obj.heading.value, "coarse_features": bundle_obj.coarse_features.value},
         "data": {"path": str(Path(data_dir).resolve()), "manifest_sha256": data.manifest_sha256,
                  "same_as_training": trained_on == data.manifest_sha256, "max_frames": max_frames},
         "error": "Euclidean distance of each garment vertex to the simulated one, every frame [mm]; "
@@ -309,6 +312,8 @@ def _markdown(metrics: dict) -> str:
         f"{'the data set the bundle was trained on' if d['same_as_training'] else 'NOT the bundle training data set'})",
         f"- coarse model: displacement added to "
         f"{'the skinned garment' if b.get('coarse_base') == 'skinned' else 'the associated body vertices (I M_b)'}",
+        f"- coarse features: the associated body vertex"
+        f"{' and the nearest body (contact)' if b.get('coarse_features') == 'contact' else ' (body)'}",
         f"- heading: the models see the body "
         f"{'turned to face +Z (canonical)' if b.get('heading') == 'canonical' else 'as it stands (world)'}",
         f"- error: {metrics['error']}",

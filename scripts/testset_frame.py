@@ -2,7 +2,7 @@
 for a side-by-side close-up (``scripts/render_tiers.py --frame-file``).
 
     .venv/bin/python scripts/testset_frame.py DATA SEQUENCE FRAME -o FRAME.npz \\
-        [--bundle models/bundles/tshirt-v5]
+        [--bundle models/bundles/tshirt-v6]
 
 DATA is a ``cloth-usd datagen`` folder (the test set), SEQUENCE a name from its manifest (or a
 unique part of one), FRAME an evaluated frame (after the warm-up, as ``cloth-usd evaluate``
@@ -34,7 +34,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("sequence")
     ap.add_argument("frame", type=int)
     ap.add_argument("-o", "--output", required=True)
-    ap.add_argument("--bundle", default=str(Path(__file__).resolve().parents[1] / "models/bundles/tshirt-v5"))
+    ap.add_argument("--bundle", default=str(Path(__file__).resolve().parents[1] / "models/bundles/tshirt-v6"))
     args = ap.parse_args(argv)
 
     body = load_body_model()

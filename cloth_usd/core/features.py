@@ -1,7 +1,10 @@
 """Node features of the learned tiers (docs/method.md), numpy only.
 
 The coarse model reads, per garment vertex, its associated posed body vertex: normal,
-position with the root translation removed, and the fit attribute a1. The detail model
+position with the root translation removed, and the fit attribute a1; a model trained with
+contact features also reads where the body nearest to the garment vertex's base point is
+(:func:`contact_features`: that body vertex's normal and the base point's signed distance
+to its tangent plane), which is how it sees an arm swung into the shirt. The detail model
 reads, per vertex of the coarse garment: normal, position with the root translation
 removed, and the distance to each of the 24 posed joints. The attribute parser reads
 (alpha, beta, theta) per frame. Feature order is the exported models' input contract
@@ -17,11 +20,17 @@ from scipy import sparse
 from ..errors import ArgumentError
 from .smpl import NUM_JOINTS
 
-__all__ = ["vertex_normals", "coarse_features", "detail_features", "attributes",
-           "COARSE_FEATURES", "DETAIL_FEATURES", "ATTRIBUTE_FEATURES", "NUM_BETAS"]
+__all__ = ["vertex_normals", "coarse_features", "contact_features", "detail_features", "attributes",
+           "COARSE_FEATURES", "CONTACT_FEATURES", "CONTACT_REACH", "DETAIL_FEATURES", "ATTRIBUTE_FEATURES",
+           "NUM_BETAS"]
 
 #: Coarse node features: body normal (3), body position minus root translation (3), a1 (1).
 COARSE_FEATURES = 7
+#: Contact features (:func:`contact_features`): nearest body normal (3), signed distance (1).
+CONTACT_FEATURES = 4
+#: How far [m] :func:`contact_features` looks for the body (so its signed distances lie in
+#: +-this); a point with no body vertex this close reads a zero normal and +this.
+CONTACT_REACH = 0.05
 #: Detail node features: normal (3), position minus root translation (3), 24 joint distances.
 DETAIL_FEATURES = 3 + 3 + NUM_JOINTS
 #: SMPL shape coefficients the parser reads.
@@ -86,6 +95,50 @@ def coarse_features(posed_body: np.ndarray, body_normals: np.ndarray, assoc_vert
     pos = np.asarray(posed_body)[:, idx] - np.asarray(transl, dtype=np.float64)[:, None, :]
     fit = np.full(pos.shape[:2] + (1,), float(a1))
     return np.concatenate([np.asarray(body_normals)[:, idx], pos, fit], axis=-1)
+
+
+def contact_features(points: np.ndarray, body_points: np.ndarray, body_normals: np.ndarray, *,
+                     reach: float = CONTACT_REACH, trees: list | None = None) -> np.ndarray:
+    """Where the body nearest to each point is: the contact features of the coarse model.
+
+    Per frame, each point's nearest body vertex ``b`` (among ``body_points``, within
+    ``reach``), its unit normal ``n`` and the point's signed distance ``dot(p - b, n)`` to
+    its tangent plane (negative: behind it, inside the body; within ``+-reach``, as ``b`` is).
+    A point with no body vertex within ``reach``, or not finite, reads ``n = 0`` and
+    ``+reach``, as if far in front of the body. The normal turns with the body and the
+    distance does not change: any frame the body and the points share gives the same.
+
+    Args:
+        points: (T, N, 3) the garment the coarse displacement is added to [m].
+        body_points: (T, K, 3) the candidate posed body vertices [m] (the body under the garment).
+        body_normals: (T, K, 3) their unit outward normals.
+        reach: search radius [m].
+        trees: T ``scipy.spatial.cKDTree`` over each frame's ``body_points``, when the caller
+            built them already (the post-process searches the same body).
+    Returns:
+        (T, N, 4) float64: normal (3), signed distance [m] (1).
+    """
+    p = np.asarray(points, dtype=np.float64)
+    b = np.asarray(body_points, dtype=np.float64)
+    n = np.asarray(body_normals, dtype=np.float64)
+    if p.ndim != 3 or p.shape[-1] != 3 or b.ndim != 3 or b.shape != n.shape or b.shape[0] != p.shape[0] \
+            or b.shape[1] == 0 or (trees is not None and len(trees) != p.shape[0]):
+        raise ArgumentError(f"points (T, N, 3), body_points and body_normals (T, K, 3) with K > 0 (and T trees) "
+                            f"expected, got {p.shape}, {b.shape}, {n.shape}")
+    from scipy.spatial import cKDTree
+
+    out = np.zeros(p.shape[:2] + (CONTACT_FEATURES,))
+    out[..., 3] = reach
+    for t in range(p.shape[0]):
+        rows = np.flatnonzero(np.isfinite(p[t]).all(axis=1))
+        tree = trees[t] if trees is not None else cKDTree(b[t])
+        index = tree.query(p[t, rows], distance_upper_bound=reach)[1]
+        found = index < b.shape[1]
+        rows, index = rows[found], index[found]
+        normal = n[t, index]
+        out[t, rows, :3] = normal
+        out[t, rows, 3] = np.einsum("rc,rc->r", p[t, rows] - b[t, index], normal)
+    return out
 
 
 def detail_features(coarse: np.ndarray, garment_faces: np.ndarray, posed_joints: np.ndarray,

@@ -9,7 +9,8 @@ these functions, so a model is trained on exactly the features it is later run o
 - :func:`pose_body`, per batch of frames: the posed body, its normals, and the body
   point and normal at each garment vertex's associated body vertex;
 - :func:`coarse_model_features` and :func:`detail_model_inputs`: the node features of
-  the two generators (:mod:`cloth_usd.core.features`);
+  the two generators (:mod:`cloth_usd.core.features`; the coarse model's set is a
+  :class:`CoarseFeatures`, as it was trained);
 - :func:`run_tiers`: coarse model -> ``M_coarse`` -> detail model -> ``M_detail`` ->
   post-process, with the models passed in as callables (an onnxruntime session or a
   torch module). The coarse model's displacement is added to a :class:`CoarseBase`: the
@@ -32,7 +33,8 @@ import numpy as np
 from ..errors import ArgumentError
 from .association import incident_faces
 from .body import BodyModel, lbs, shape_body
-from .features import attributes, coarse_features, detail_features, vertex_normals
+from .features import (CONTACT_FEATURES, COARSE_FEATURES, attributes, coarse_features, contact_features,
+                       detail_features, vertex_normals)
 from .fit import FitModel, pair_distances
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
@@ -43,9 +45,10 @@ from .smpl import JOINT_NAMES
 
 __all__ = ["GarmentPair", "BodyPatch", "body_patch", "body_under", "swinging_parts", "SWINGING_JOINTS", "CONTACT_REACH",
            "PosedBody", "prepare_pair", "pose_body", "coarse_model_features", "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn",
-           "CoarseBase", "coarse_base_points"]
+           "CoarseBase", "coarse_base_points", "CoarseFeatures", "coarse_feature_count",
+           "contact_trees"]
 
-#: A coarse model: ``(features (B, N, 7), graph) -> delta (B, N, 3) [m]``.
+#: A coarse model: ``(features (B, N, F), graph) -> delta (B, N, 3) [m]`` (F: :func:`coarse_feature_count`).
 CoarseFn = Callable[[np.ndarray, MeshGraph], np.ndarray]
 #: A detail model: ``(features (B, N, 30), attributes (B, 85), graph) -> delta (B, N, 3) [m]``.
 DetailFn = Callable[[np.ndarray, np.ndarray, MeshGraph], np.ndarray]
@@ -59,6 +62,23 @@ class CoarseBase(str, enum.Enum):
     SKINNED = "skinned"
     """The skinning tier's garment: the rest garment carried by the body's LBS, so the model
     learns only how the garment departs from skinning (a zero displacement is the skinning tier)."""
+
+
+class CoarseFeatures(str, enum.Enum):
+    """The coarse model's node features (what it was trained on; a bundle's ``models.coarse.features``)."""
+
+    BODY = "body"
+    """7 per vertex: the associated posed body vertex's normal and position, and a1 (docs/method.md)."""
+    CONTACT = "contact"
+    """11 per vertex: those, then where the body nearest to the vertex's coarse base point is
+    (:func:`~cloth_usd.core.features.contact_features`: that body vertex's normal and the
+    signed distance to its tangent plane, searched in the body under the garment), so the
+    model sees an arm or a thigh that skinning puts into the garment."""
+
+
+def coarse_feature_count(kind: CoarseFeatures | str) -> int:
+    """F, the coarse model's node features of ``kind``."""
+    return COARSE_FEATURES + (CONTACT_FEATURES if CoarseFeatures(kind) is CoarseFeatures.CONTACT else 0)
 
 
 @dataclass(frozen=True)
@@ -249,10 +269,36 @@ def pose_body(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
                      patch_points=verts, patch_normals=normals)
 
 
-def coarse_model_features(pair: GarmentPair, posed: PosedBody, transl: np.ndarray) -> np.ndarray:
-    """(T, N, 7) float64 coarse node features (:func:`~cloth_usd.core.features.coarse_features`)."""
-    return coarse_features(posed.garment_points, posed.garment_normals, np.arange(pair.num_vertices), transl,
-                           pair.alpha[0])
+def contact_trees(pair: GarmentPair, posed: PosedBody) -> list:
+    """A ``scipy.spatial.cKDTree`` per frame over the posed body under the garment
+    (:attr:`BodyPatch.contact`): what the contact features and the post-process search."""
+    from scipy.spatial import cKDTree
+
+    cloud = posed.patch_points[:, pair.patch.contact]
+    return [cKDTree(c, leafsize=32, balanced_tree=False, compact_nodes=False) for c in cloud]  # 1/5 faster here
+
+
+def coarse_model_features(pair: GarmentPair, posed: PosedBody, transl: np.ndarray,
+                          kind: CoarseFeatures | str = CoarseFeatures.BODY, *, base: np.ndarray | None = None,
+                          trees: list | None = None) -> np.ndarray:
+    """(T, N, F) float64 coarse node features of ``kind``
+    (:func:`~cloth_usd.core.features.coarse_features`, then for :attr:`CoarseFeatures.CONTACT`
+    :func:`~cloth_usd.core.features.contact_features`).
+
+    Args:
+        base: (T, N, 3) the coarse base [m] (:func:`coarse_base_points`), where the contact
+            features are measured; needed by :attr:`CoarseFeatures.CONTACT` only.
+        trees: :func:`contact_trees` of ``posed``, when the caller built them already.
+    """
+    feats = coarse_features(posed.garment_points, posed.garment_normals, np.arange(pair.num_vertices), transl,
+                            pair.alpha[0])
+    if CoarseFeatures(kind) is CoarseFeatures.BODY:
+        return feats
+    if base is None:
+        raise ArgumentError("coarse_model_features: the contact features need the coarse base points")
+    cloud = pair.patch.contact
+    contact = contact_features(base, posed.patch_points[:, cloud], posed.patch_normals[:, cloud], trees=trees)
+    return np.concatenate([feats, contact], axis=-1)
 
 
 def detail_model_inputs(pair: GarmentPair, coarse_points: np.ndarray, posed: PosedBody, poses: np.ndarray,
@@ -292,7 +338,8 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
               coarse: CoarseFn, detail: DetailFn | None = None, *, batch_size: int = 16,
               margin: float = DEFAULT_MARGIN, coarse_base: CoarseBase | str = CoarseBase.BODY,
               heading: Heading | str = Heading.WORLD,
-              skinned: np.ndarray | None = None, postprocess: bool = True) -> tuple[np.ndarray, np.ndarray]:
+              skinned: np.ndarray | None = None, postprocess: bool = True,
+              coarse_features: CoarseFeatures | str = CoarseFeatures.BODY) -> tuple[np.ndarray, np.ndarray]:
     """Animate a garment with a coarse model and, if given, a detail model.
 
     ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
@@ -314,6 +361,7 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
             one, instead of skinning every frame again. Unused with a body base.
         postprocess: False leaves the models' garment as they made it (what the post-process
             starts from: how far into the body they put it); ``moved`` is then all zero.
+        coarse_features: :class:`CoarseFeatures`, as the coarse model was trained.
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the garment per frame and
         how many vertices the post-process moved in each.
@@ -331,6 +379,7 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
         poses = frame.canonical_poses(poses)
         if skinned is not None:
             skinned = frame.to_canonical(skinned)
+    kind = CoarseFeatures(coarse_features)
     points = np.empty((num_t, n, 3))
     moved = np.zeros(num_t, dtype=np.int64)
     for lo in range(0, num_t, batch_size):
@@ -338,14 +387,15 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
         posed = pose_body(body, pair, poses[lo:hi], transl[lo:hi])
         base = coarse_base_points(body, pair, posed, poses[lo:hi], transl[lo:hi], coarse_base,
                                   skinned=None if skinned is None else skinned[lo:hi])
-        m = base + coarse(coarse_model_features(pair, posed, transl[lo:hi]), pair.graph)
+        trees = contact_trees(pair, posed) if kind is CoarseFeatures.CONTACT else None  # searched twice, built once
+        m = base + coarse(coarse_model_features(pair, posed, transl[lo:hi], kind, base=base, trees=trees), pair.graph)
         if detail is not None:
             feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])
             m = m + detail(feats, attrs, pair.graph)
         if postprocess:
             points[lo:hi], moved[lo:hi] = push_out_of_surface(m, posed.patch_points, posed.patch_normals,
                                                               pair.patch.faces, pair.patch.contact, margin=margin,
-                                                              rings=pair.patch.rings)
+                                                              rings=pair.patch.rings, trees=trees)
         else:
             points[lo:hi] = m
     return (points if frame is None else frame.to_world(points)), moved

@@ -127,7 +127,8 @@ SURFACE_REACH = 0.02
 def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normals: np.ndarray,
                         body_faces: np.ndarray, candidates: np.ndarray, *, margin: float = DEFAULT_MARGIN,
                         reach: float = SEARCH_REACH, neighbours: int = SURFACE_CANDIDATES,
-                        rounds: int = SURFACE_ROUNDS, rings: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                        rounds: int = SURFACE_ROUNDS, rings: np.ndarray | None = None,
+                        trees: list | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The post-process: push garment vertices out of the body's surface, to ``margin`` in front of it.
 
     Per frame, each garment vertex's ``neighbours`` nearest candidate body vertices are found
@@ -152,6 +153,8 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
         rounds: surface tests of a vertex, at most (one the test moved is tested again).
         rings: (V', D) int the rows of ``body_faces`` around each body vertex, padded with -1
             (:func:`~cloth_usd.core.association.incident_faces`); made here when None.
+        trees: T ``scipy.spatial.cKDTree`` over each frame's candidates (``body_points[t,
+            candidates]``), when the caller built them already; made here when None.
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the corrected points (a new
         array; a non-finite vertex is left as it is, for the guard) and how many vertices
@@ -163,9 +166,10 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     faces = np.asarray(body_faces, dtype=np.int64)
     cand = np.asarray(candidates, dtype=np.int64)
     if p.ndim != 3 or p.shape[-1] != 3 or b.ndim != 3 or b.shape != n.shape or b.shape[0] != p.shape[0] \
-            or cand.ndim != 1 or cand.size == 0 or faces.ndim != 2 or faces.shape[1] != 3:
-        raise ArgumentError(f"points (T, N, 3), body_points and body_normals (T, V', 3), body_faces (M', 3) and "
-                            f"candidates (K,) with K > 0 expected, got {p.shape}, {b.shape}, {n.shape}, "
+            or cand.ndim != 1 or cand.size == 0 or faces.ndim != 2 or faces.shape[1] != 3 \
+            or (trees is not None and len(trees) != p.shape[0]):
+        raise ArgumentError(f"points (T, N, 3), body_points and body_normals (T, V', 3), body_faces (M', 3), "
+                            f"candidates (K,) with K > 0 (and T trees) expected, got {p.shape}, {b.shape}, {n.shape}, "
                             f"{faces.shape}, {cand.shape}")
     if not margin >= 0:
         raise ArgumentError(f"margin must be >= 0 [m], got {margin}")
@@ -176,7 +180,8 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     for t in range(p.shape[0]):  # the search per frame; the tests below over every frame at once
         r = np.flatnonzero(np.isfinite(p[t]).all(axis=1))  # a non-finite vertex stays so (the guard catches it)
         if r.size:
-            tree = cKDTree(b[t, cand], leafsize=32, balanced_tree=False, compact_nodes=False)  # 1/5 faster here
+            tree = trees[t] if trees is not None else \
+                cKDTree(b[t, cand], leafsize=32, balanced_tree=False, compact_nodes=False)  # 1/5 faster here
             index = tree.query(p[t, r], k=k, distance_upper_bound=min(reach, SURFACE_REACH))[1].reshape(r.size, k)
             far = np.flatnonzero(index[:, 0] == cand.size)
             if far.size and reach > SURFACE_REACH:  # the nearest alone, further out (a quarter of the search's cost)

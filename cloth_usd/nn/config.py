@@ -13,7 +13,7 @@ import torch
 
 from ..core.files import read_config
 from ..core.heading import Heading
-from ..core.pipeline import CoarseBase
+from ..core.pipeline import CoarseBase, CoarseFeatures, coarse_feature_count
 from ..core.scene import Tier
 from ..errors import ArgumentError
 from .data import CoarseTarget
@@ -111,6 +111,11 @@ class TrainConfig:
     bending_scale: float = 1.0
     """Physics objective only: multiplies the material's bending stiffness (a stiffer
     bending makes the coarse tier drape without fine folds)."""
+    contact_margin: float | None = None
+    """Physics and hybrid objectives only [m]: the body contact's margin ``r`` (the contact
+    energy starts ``r`` in front of the body, its weight stays the simulator's stiffness over
+    ``r``); None: the simulator's (4 mm). A larger one keeps the learned garment further off
+    the body, so that less of it ends inside before the post-process."""
     supervised_weight: float = 1000.0
     """Hybrid objective only [1/s^2]: the supervised term of a frame is
     ``supervised_weight / 2 * sum_n m_n |x_n - y_n|^2`` [J] (``m_n`` the vertex masses [kg],
@@ -118,6 +123,10 @@ class TrainConfig:
     acceleration ``supervised_weight x distance``: as strong as gravity at ``9.81 /
     supervised_weight`` [m] (1 cm at the default; a starting point, not tuned). 0: the physics
     objective's loss."""
+    coarse_features: CoarseFeatures = CoarseFeatures.BODY
+    """Coarse only: the coarse model's node features: ``body`` (docs/method.md's, at the
+    associated body vertex) or ``contact`` (those and the nearest body under the garment,
+    :class:`~cloth_usd.core.pipeline.CoarseFeatures`; a detail run takes its coarse run's)."""
     heading: Heading = Heading.CANONICAL
     """Coarse only: the frame the models see the body in (a detail run takes its coarse
     run's): ``canonical`` turns every frame's body to face +Z (the garment turned with it), so
@@ -126,7 +135,7 @@ class TrainConfig:
 
     def __post_init__(self) -> None:
         for key, kind in (("coarse_input", CoarseInput), ("coarse_target", CoarseTarget), ("coarse_base", CoarseBase),
-                          ("heading", Heading), ("objective", Objective)):
+                          ("coarse_features", CoarseFeatures), ("heading", Heading), ("objective", Objective)):
             value = getattr(self, key)
             if value not in {k.value for k in kind}:  # str enums: a member equals its value
                 raise ArgumentError(f"TrainConfig: {key}={value!r} is not one of {', '.join(k.value for k in kind)}")
@@ -136,7 +145,8 @@ class TrainConfig:
                   "stat_frames": self.stat_frames >= 1, "val_frames": self.val_frames >= 0,
                   "max_batches": self.max_batches >= 0, "max_frames": self.max_frames >= 0,
                   "prefetch": self.prefetch >= 0, "bending_scale": self.bending_scale > 0,
-                  "supervised_weight": self.supervised_weight >= 0}
+                  "supervised_weight": self.supervised_weight >= 0,
+                  "contact_margin": self.contact_margin is None or self.contact_margin > 0}
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
             raise ArgumentError(f"TrainConfig: out of range: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
@@ -172,7 +182,8 @@ def load_train_config(path: str | Path | None, **overrides: Any) -> TrainConfig:
 def model_config(tier: Tier | str, config: TrainConfig) -> CoarseConfig | DetailConfig:
     """The model config a TrainConfig asks for (paper widths times ``width``)."""
     if trainable(tier) is Tier.COARSE:
-        return CoarseConfig(width=config.width, decompose=config.decompose)
+        return CoarseConfig(in_features=coarse_feature_count(config.coarse_features), width=config.width,
+                            decompose=config.decompose)
     return DetailConfig(width=config.width, decompose=config.decompose, use_parser=config.use_parser)
 
 

@@ -32,6 +32,7 @@ from ..core.fit import FitModel
 from ..core.heading import Heading, heading_frame
 from ..core.pipeline import (
     CoarseBase,
+    CoarseFeatures,
     GarmentPair,
     PosedBody,
     coarse_base_points,
@@ -284,7 +285,7 @@ class CoarseExample:
     """Coarse model inputs and target for a batch of frames of one clip."""
 
     features: np.ndarray
-    """(B, N, 7) float64 node features."""
+    """(B, N, F) float64 node features (F: :func:`~cloth_usd.core.pipeline.coarse_feature_count`)."""
     base: np.ndarray
     """(B, N, 3) float64 the points the displacement is added to [m]: ``I M_b`` (the
     associated posed body vertices) or the skinned garment."""
@@ -307,14 +308,15 @@ class DetailExample:
     """(B, N, 3) float64 ``Delta_detail^GT = M_sim - M_coarse`` [m]."""
 
 
-def coarse_example(body: BodyModel, clip: Clip, frames: np.ndarray,
-                   base: CoarseBase | str = CoarseBase.BODY) -> CoarseExample:
-    """Coarse inputs and target of ``frames`` of ``clip`` (the runtime's feature path),
-    the displacement measured from ``base`` (:class:`~cloth_usd.core.pipeline.CoarseBase`)."""
+def coarse_example(body: BodyModel, clip: Clip, frames: np.ndarray, base: CoarseBase | str = CoarseBase.BODY,
+                   features: CoarseFeatures | str = CoarseFeatures.BODY) -> CoarseExample:
+    """Coarse inputs (``features``, :class:`~cloth_usd.core.pipeline.CoarseFeatures`) and
+    target of ``frames`` of ``clip`` (the runtime's feature path), the displacement measured
+    from ``base`` (:class:`~cloth_usd.core.pipeline.CoarseBase`)."""
     poses, transl = clip.poses[frames], clip.transl[frames]
     posed = pose_body(body, clip.pair, poses, transl)
-    feats = coarse_model_features(clip.pair, posed, transl)
     points = coarse_base_points(body, clip.pair, posed, poses, transl, base)
+    feats = coarse_model_features(clip.pair, posed, transl, features, base=points)
     return CoarseExample(features=feats, base=points, target=clip.coarse[frames].astype(np.float64) - points,
                          posed=posed)
 

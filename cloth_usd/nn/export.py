@@ -20,7 +20,7 @@ import torch
 
 from ..core.graph import build_graph
 from ..core.heading import Heading
-from ..core.pipeline import CoarseBase
+from ..core.pipeline import CoarseBase, CoarseFeatures
 from ..runtime.io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT, detail_inputs
 from .models import ATTRIBUTE_FEATURES, CoarseGenerator, DetailGenerator
 
@@ -87,7 +87,8 @@ def export_detail(model: DetailGenerator, path: str | Path) -> Path:
 
 def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | None, clips, body,
             frames: int, coarse_base: CoarseBase | str = CoarseBase.BODY,
-            heading: Heading | str = Heading.WORLD) -> dict:
+            heading: Heading | str = Heading.WORLD,
+            coarse_features: CoarseFeatures | str = CoarseFeatures.BODY) -> dict:
     """Largest point difference [m] between the torch models and their ONNX files, through
     the runtime's pipeline (:func:`cloth_usd.core.pipeline.run_tiers`), on ``clips``."""
     from ..core.pipeline import run_tiers
@@ -117,9 +118,10 @@ def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | N
             if tier == "detail" and t_detail is None:
                 continue
             want, _ = run_tiers(body, clip.pair, poses, transl, t_coarse, t_detail if tier == "detail" else None,
-                                coarse_base=coarse_base, heading=heading)
+                                coarse_base=coarse_base, heading=heading, coarse_features=coarse_features)
             got, _ = run_tiers(body, clip.pair, poses, transl, onnx_coarse,
-                               onnx_detail if tier == "detail" else None, coarse_base=coarse_base, heading=heading)
+                               onnx_detail if tier == "detail" else None, coarse_base=coarse_base, heading=heading,
+                               coarse_features=coarse_features)
             worst[tier] = max(worst[tier], float(np.abs(got - want).max()))
     return {"coarse_max_m": worst["coarse"], "detail_max_m": worst["detail"] if t_detail is not None else None,
             "sequences": len(clips), "frames": used}
@@ -223,7 +225,8 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         coarse_path = export_coarse(coarse.model, tmp / "coarse.onnx")
         detail_path = export_detail(detail.model, tmp / "detail.onnx") if detail is not None else None
         parity = _parity(coarse.model, detail.model if detail else None, coarse_path, detail_path, clips,
-                         body, parity_frames, coarse.config.coarse_base, coarse.config.heading)
+                         body, parity_frames, coarse.config.coarse_base, coarse.config.heading,
+                         coarse.config.coarse_features)
         worst = max(v for v in (parity["coarse_max_m"], parity["detail_max_m"]) if v is not None)
         if not worst <= tolerance:
             raise ClothUsdError(f"export parity failed: ONNX and torch differ by {worst * 1000:.4f} mm on the "
@@ -245,7 +248,8 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         out = write_bundle(out_dir, name=name, category=category, coarse_onnx=coarse_path,
                            detail_onnx=detail_path, fit_npz=fit_npz, configs=configs,
                            training_data=training, metrics=summary, opset=OPSET, force=force,
-                           coarse_base=coarse.config.coarse_base, heading=coarse.config.heading)
+                           coarse_base=coarse.config.coarse_base, heading=coarse.config.heading,
+                           coarse_features=coarse.config.coarse_features)
     load_bundle(out)
     return out
 

@@ -71,8 +71,8 @@ import torch
 from ..core.body import BodyModel, load_body_model
 from ..core.fit import FitModel
 from ..core.heading import Heading, heading_frame
-from ..core.pipeline import (CoarseBase, GarmentPair, coarse_base_points, coarse_model_features, detail_model_inputs,
-                             pose_body, prepare_pair)
+from ..core.pipeline import (CoarseBase, CoarseFeatures, GarmentPair, coarse_base_points, coarse_model_features,
+                             detail_model_inputs, pose_body, prepare_pair)
 from ..core.postprocess import nearest_vertex
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError, ClothUsdError
@@ -247,7 +247,8 @@ class PhysicsSet:
 
 def physics_set(config_path: str | Path, body: BodyModel | None = None, *, heading: Heading | str = Heading.CANONICAL,
                 splits: Sequence[Split | str] | None = None, max_frames: int | None = None,
-                bending_scale: float = 1.0, mocap_dir: str | Path | None = None,
+                bending_scale: float = 1.0, contact_margin: float | None = None,
+                mocap_dir: str | Path | None = None,
                 sim_data: str | Path | None = None, sim_target: CoarseTarget | str | None = None) -> PhysicsSet:
     """Plan a data set config's sequences (no simulation) for the physics objective.
 
@@ -258,6 +259,7 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
         splits: the splits to keep (all when None).
         max_frames: cut every sequence to its first frames.
         bending_scale: multiplies the material's bending stiffness.
+        contact_margin: the contact margin [m] instead of the simulator's (``TrainConfig.contact_margin``).
         mocap_dir: the folder the config's BVH motions are relative to (see
             :func:`~cloth_usd.datagen.factory.load_config`).
         sim_data: a ``cloth-usd datagen`` folder of this config: every clip whose sequence it
@@ -278,6 +280,8 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
     fit, _ = fit_training_pairs(jobs, body)
     base = Material.from_sim_config(SimConfig(**factory.sim))
     material = dataclasses.replace(base, bend_stiffness=base.bend_stiffness * bending_scale)
+    if contact_margin is not None:
+        material = dataclasses.replace(material, contact_margin=float(contact_margin))
     rates = _motion_rates(factory, config_path)
     sim_fps = float(SimConfig(**factory.sim).fps)
     keep = None if splits is None else {Split(s) for s in splits}
@@ -424,14 +428,16 @@ class _Inputs:
 class _Tier:
     """What one tier's physics training computes per batch, the model call included."""
 
-    def __init__(self, tier: Tier, body: BodyModel, base: CoarseBase, tensors: _Tensors, coarse_model=None) -> None:
+    def __init__(self, tier: Tier, body: BodyModel, base: CoarseBase, tensors: _Tensors, coarse_model=None,
+                 features: CoarseFeatures = CoarseFeatures.BODY) -> None:
         self.tier, self.body, self.base, self.tensors, self.coarse_model = tier, body, base, tensors, coarse_model
+        self.features = features
 
     def inputs(self, clip: PhysicsClip, frames: np.ndarray) -> _Inputs:
         poses, transl = clip.poses[frames], clip.transl[frames]
         posed = pose_body(self.body, clip.pair, poses, transl)
-        feats = coarse_model_features(clip.pair, posed, transl)
         base = coarse_base_points(self.body, clip.pair, posed, poses, transl, self.base)
+        feats = coarse_model_features(clip.pair, posed, transl, self.features, base=base)
         cloud = clip.pair.patch.contact
         contact = (posed.garment_points, posed.garment_normals, posed.patch_points[:, cloud],
                    posed.patch_normals[:, cloud])
@@ -463,7 +469,7 @@ def _statistics(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainC
     near the base: the last layers are shrunk so a fresh model moves the garment by about a
     millimetre, not by :data:`OUTPUT_SCALE` in random directions (which tears the membrane:
     hundreds of J against the skinned garment's few, a hole the optimiser climbs out of slowly)."""
-    feats, attrs = Moments(7 if step.tier is Tier.COARSE else 30), Moments(85)
+    feats, attrs = Moments(model.config.in_features), Moments(85)
     for k, frames in plan_batches(clips, config.batch, frames=config.stat_frames):
         inp = step.inputs(clips[k], frames)
         feats.add(inp.features)
@@ -717,8 +723,10 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
         raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run, not a coarse one")
     heading = coarse.config.heading if coarse is not None else config.heading
     base = coarse.config.coarse_base if coarse is not None else config.coarse_base
+    features = coarse.config.coarse_features if coarse is not None else config.coarse_features
     data = physics_set(config_path, body, heading=heading, splits=(Split.TRAIN, Split.VAL),
                        max_frames=config.max_frames or None, bending_scale=config.bending_scale,
+                       contact_margin=config.contact_margin,
                        mocap_dir=mocap_dir, sim_data=sim_data,
                        sim_target=config.coarse_target if tier is Tier.COARSE else None)
     train_clips, val_clips = data.split(Split.TRAIN), data.split(Split.VAL)
@@ -728,7 +736,7 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
         raise ArgumentError(f"{config_path}: no training sequence has {len(options.window)} frames for the "
                             "dynamic objective's window (raise max_frames)")
     tensors = _Tensors(dev)
-    step = _Tier(tier, body, base, tensors, coarse.model if coarse is not None else None)
+    step = _Tier(tier, body, base, tensors, coarse.model if coarse is not None else None, features)
     torch.manual_seed(config.seed)
     model = build_model(tier, config).to(dev)
     _statistics(model, step, train_clips, config)

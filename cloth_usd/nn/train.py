@@ -33,7 +33,8 @@ import numpy as np
 import torch
 
 from ..core.body import BodyModel
-from ..core.pipeline import CoarseBase
+from ..core.features import DETAIL_FEATURES
+from ..core.pipeline import CoarseBase, CoarseFeatures, coarse_feature_count
 from ..core.scene import Tier
 from ..errors import ArgumentError, ClothUsdError, OutputWriteError
 from .config import (TRAINABLE_TIERS, CoarseInput, Objective, TrainConfig, build_model, load_train_config, model_config,
@@ -74,16 +75,19 @@ class _Examples:
 
     def __init__(self, tier: Tier, body: BodyModel, clips: Sequence[Clip], config: TrainConfig,
                  coarse_model: CoarseGenerator | None, device: torch.device,
-                 coarse_base: CoarseBase | None = None) -> None:
+                 coarse_base: CoarseBase | None = None, coarse_features: CoarseFeatures | None = None) -> None:
         self.tier, self.body, self.clips, self.config = tier, body, clips, config
         self.coarse_model = coarse_model
         self.coarse_base = CoarseBase(coarse_base) if coarse_base is not None else config.coarse_base
         """The coarse model's base: the config's (coarse), the coarse run's (detail)."""
+        self.coarse_features = CoarseFeatures(coarse_features) if coarse_features is not None \
+            else config.coarse_features
+        """The coarse model's features, taken as the base is."""
         self.tensors = Tensors(device)
 
     def _first(self, item: tuple[int, np.ndarray]):
         clip = self.clips[item[0]]
-        return clip, item[1], coarse_example(self.body, clip, item[1], self.coarse_base)
+        return clip, item[1], coarse_example(self.body, clip, item[1], self.coarse_base, self.coarse_features)
 
     def iterate(self, batches: Sequence[tuple[int, np.ndarray]]) -> Iterable[tuple]:
         """``(clip, features, attributes | None, base, target)`` per batch, in order."""
@@ -117,7 +121,7 @@ class _Examples:
 
 def _statistics(examples: _Examples, clips: Sequence[Clip], config: TrainConfig) -> Statistics:
     tier = examples.tier
-    feats = Moments(7 if tier is Tier.COARSE else 30)
+    feats = Moments(coarse_feature_count(examples.coarse_features) if tier is Tier.COARSE else DETAIL_FEATURES)
     target, attrs = Moments(3), Moments(85)
     for _, f, a, _, t in examples.iterate(plan_batches(clips, config.batch, frames=config.stat_frames)):
         feats.add(f)
@@ -239,8 +243,9 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
             "coarse_run": coarse_run_record(coarse) if coarse is not None else None,
             "body_model_sha256": data.body.sha256, "torch": torch.__version__}
     base = coarse.config.coarse_base if coarse is not None else config.coarse_base
-    examples = _Examples(tier, data.body, train_clips, config, coarse.model if coarse else None, dev, base)
-    val_examples = _Examples(tier, data.body, val_clips, config, coarse.model if coarse else None, dev, base)
+    features = coarse.config.coarse_features if coarse is not None else config.coarse_features
+    examples = _Examples(tier, data.body, train_clips, config, coarse.model if coarse else None, dev, base, features)
+    val_examples = _Examples(tier, data.body, val_clips, config, coarse.model if coarse else None, dev, base, features)
 
     torch.manual_seed(config.seed)
     model = build_model(tier, config).to(dev)

@@ -29,7 +29,7 @@ from typing import Any, Iterable, Mapping
 from ..core.files import file_sha256, models_dir
 from ..core.fit import FitModel
 from ..core.heading import Heading
-from ..core.pipeline import CoarseBase
+from ..core.pipeline import CoarseBase, CoarseFeatures
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError, BundleError, ClothUsdError
 from .io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT
@@ -76,6 +76,9 @@ class ModelBundle:
     heading: Heading = Heading.WORLD
     """The frame the models see the body in (manifest ``models.coarse.heading``; bundles
     without the field: ``world``, as tshirt-v1..v3 were trained)."""
+    coarse_features: CoarseFeatures = CoarseFeatures.BODY
+    """The coarse model's node features (manifest ``models.coarse.features``; bundles without
+    the field: ``body``, as tshirt-v1..v5 were trained)."""
     _sessions: dict = field(default_factory=dict, repr=False)
 
     def model_path(self, tier: Tier) -> Path:
@@ -166,6 +169,10 @@ def load_bundle(path: str | Path) -> ModelBundle:
     if heading not in {h.value for h in Heading}:
         raise BundleError(f"{mpath}: models.coarse.heading {heading!r} is not one of "
                           f"{', '.join(h.value for h in Heading)}")
+    features = models[Tier.COARSE.value].get("features", CoarseFeatures.BODY.value)
+    if features not in {f.value for f in CoarseFeatures}:
+        raise BundleError(f"{mpath}: models.coarse.features {features!r} is not one of "
+                          f"{', '.join(f.value for f in CoarseFeatures)} (a newer bundle? update cloth-usd)")
     fit_file = _field(manifest, "fit", dict, mpath).get("file")
     if fit_file not in files:
         raise BundleError(f"{mpath}: fit.file must name a file listed in 'files'")
@@ -186,7 +193,8 @@ def load_bundle(path: str | Path) -> ModelBundle:
         raise BundleError(f"{folder}: bundle file {fit_file} is not a fit model ({exc})") from exc
     return ModelBundle(path=folder, name=name, category=category, tiers=tiers,
                        sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit,
-                       coarse_base=CoarseBase(base), heading=Heading(heading))
+                       coarse_base=CoarseBase(base), heading=Heading(heading),
+                       coarse_features=CoarseFeatures(features))
 
 
 #: In a folder of bundles: ``{"<category>": "<bundle folder>"}``, the bundle tried first for a
@@ -267,7 +275,8 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
                  detail_onnx: str | Path | None, fit_npz: str | Path, configs: Mapping[str, Any],
                  training_data: Mapping[str, Any], metrics: Mapping[str, Any], opset: int,
                  force: bool = False, coarse_base: CoarseBase | str = CoarseBase.BODY,
-                 heading: Heading | str = Heading.WORLD) -> Path:
+                 heading: Heading | str = Heading.WORLD,
+                 coarse_features: CoarseFeatures | str = CoarseFeatures.BODY) -> Path:
     """Copy exported models and the fit model into a new bundle folder and write its manifest.
 
     Args:
@@ -282,6 +291,7 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         opset: the ONNX opset of the exported files.
         coarse_base: what the coarse model's displacement is added to, as it was trained.
         heading: the frame the models were trained to see the body in.
+        coarse_features: the coarse model's node features, as it was trained.
     Returns:
         The bundle folder.
     """
@@ -314,6 +324,7 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         if tier is Tier.COARSE:
             models[tier.value]["base"] = CoarseBase(coarse_base).value
             models[tier.value]["heading"] = Heading(heading).value
+            models[tier.value]["features"] = CoarseFeatures(coarse_features).value
         tiers.append(tier.value)
     shutil.copyfile(fit_npz, out / _FIT)
     files[_FIT] = file_sha256(out / _FIT)

@@ -2,7 +2,9 @@
 
 Coarse model inputs, in order (B frames, N vertices, K neighbours):
 
-- ``features`` (B, N, 7) float32: body normal, body position minus root translation [m], fit a1;
+- ``features`` (B, N, F) float32: body normal, body position minus root translation [m], fit a1
+  (F = 7); a bundle whose ``models.coarse.features`` is ``contact`` then adds the nearest body
+  normal and the signed distance to it [m] (F = 11, :class:`cloth_usd.core.pipeline.CoarseFeatures`);
 - ``nbr`` (N, K) int64 neighbour table; ``nbr_mask`` (N, K) bool.
 
 Detail model inputs, in order (N2 pooled clusters, P members, K2 pooled neighbours):
@@ -35,7 +37,7 @@ def coarse_inputs(features: np.ndarray, table: NeighbourTable) -> dict[str, np.n
     """Named coarse-model inputs.
 
     Args:
-        features: (B, N, 7) float node features.
+        features: (B, N, F) float node features (F: 7, or 11 with contact features).
         table: the garment's (N, K) neighbour table.
     """
     return {

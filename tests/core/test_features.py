@@ -5,7 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cloth_usd.core.features import attributes, coarse_features, detail_features, vertex_normals
+from cloth_usd.core.features import (CONTACT_REACH, attributes, coarse_features, contact_features, detail_features,
+                                     vertex_normals)
 from cloth_usd.errors import ArgumentError
 
 # A flat unit square in the z = 0 plane, two counter-clockwise triangles (seen from +z),
@@ -44,6 +45,31 @@ def test_coarse_features():
     np.testing.assert_allclose(f[0, 0, 3:6], [1, 1, 0])
     np.testing.assert_allclose(f[1, 0, 3:6], [1, 1, 0])  # the translation is removed
     assert (f[..., 6] == 0.7).all()
+
+
+def test_contact_features_read_the_signed_distance_to_the_nearest_body_vertex_plane():
+    """A body of two vertices facing +z and +x; points in front of, behind, far from them."""
+    body = np.array([[[0, 0, 0], [1, 0, 0]]], dtype=float)
+    normals = np.array([[[0, 0, 1], [1, 0, 0]]], dtype=float)
+    pts = np.array([[[0, 0, 0.01],        # 1 cm in front of vertex 0
+                     [0.02, 0, -0.015],   # behind vertex 0's plane: inside
+                     [1.0, 0.003, -0.2],  # nearest vertex 1 lies 0.2 m off: out of reach
+                     [1.03, 0.0, 0.0],    # in front of vertex 1's plane, along +x
+                     [np.nan, 0, 0]]])    # not finite: read as far
+    f = contact_features(pts, body, normals)
+    assert f.shape == (1, 5, 4)
+    np.testing.assert_allclose(f[0, 0], [0, 0, 1, 0.01], atol=1e-12)
+    np.testing.assert_allclose(f[0, 1], [0, 0, 1, -0.015], atol=1e-12)
+    np.testing.assert_allclose(f[0, 2], [0, 0, 0, CONTACT_REACH])
+    np.testing.assert_allclose(f[0, 3], [1, 0, 0, 0.03], atol=1e-12)
+    np.testing.assert_allclose(f[0, 4], [0, 0, 0, CONTACT_REACH])
+    deep = contact_features(np.array([[[0, 0, -0.049], [0, 0, -0.051]]]), body, normals)
+    np.testing.assert_allclose(deep[0, :, 3], [-0.049, CONTACT_REACH], atol=1e-12)  # deeper than the reach: far
+    from scipy.spatial import cKDTree
+
+    np.testing.assert_array_equal(contact_features(pts, body, normals, trees=[cKDTree(body[0])]), f)
+    with pytest.raises(ArgumentError, match="T trees"):
+        contact_features(pts, body, normals, trees=[])
 
 
 def test_detail_features_joint_distances():

@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from cloth_usd.core.body import lbs, load_body_model, shape_body
 from cloth_usd.core.heading import Heading, heading_frame, root_yaw, yaw_matrices
-from cloth_usd.core.pipeline import CoarseBase, prepare_pair, run_tiers
+from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures, prepare_pair, run_tiers
 from cloth_usd.datagen import TShirtParams, make_tshirt, walk_cycle
 from cloth_usd.errors import ArgumentError
 from cloth_usd.runtime.bundle import find_bundle
@@ -65,23 +65,28 @@ def test_the_canonical_body_is_the_world_body_turned_about_the_pelvis(shirt):
 
 
 def _wavy_coarse(feats, graph):
-    """A stand-in model that reads absolute directions: body normal and position."""
-    return 0.01 * np.tanh(feats[..., 0:3] * 3.0 + feats[..., 3:6] * 5.0)
+    """A stand-in model that reads absolute directions: body normal and position (and, with
+    the contact features, the nearest body normal and the distance to it)."""
+    out = 0.01 * np.tanh(feats[..., 0:3] * 3.0 + feats[..., 3:6] * 5.0)
+    if feats.shape[-1] == 11:
+        out += feats[..., 7:10] * np.maximum(0.01 - feats[..., 10:11], 0.0)
+    return out
 
 
 def _wavy_detail(feats, attrs, graph):
     return 0.004 * np.sin(feats[..., 3:6] * 20.0) * np.tanh(attrs[:, None, :3].sum(-1, keepdims=True) + 1.0)
 
 
+@pytest.mark.parametrize("features", list(CoarseFeatures))
 @pytest.mark.parametrize("base", list(CoarseBase))
-def test_learned_tiers_give_the_same_local_garment_at_any_heading(shirt, base):
+def test_learned_tiers_give_the_same_local_garment_at_any_heading(shirt, base, features):
     body, pair, poses, transl = shirt
     ref, _ = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail, coarse_base=base,
-                       heading=Heading.CANONICAL)
+                       heading=Heading.CANONICAL, coarse_features=features)
     for deg in (0.0, 30.0, 137.0, 180.0):
         p, t, turn = _turned(poses, transl, pair.joints[0], deg)
         got, _ = run_tiers(body, pair, p, t, _wavy_coarse, _wavy_detail, coarse_base=base,
-                           heading=Heading.CANONICAL)
+                           heading=Heading.CANONICAL, coarse_features=features)
         local = turn.inv().apply(got.reshape(-1, 3)).reshape(got.shape)
         assert np.abs(local - ref).max() < 1e-5  # 1e-2 mm
 

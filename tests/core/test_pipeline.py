@@ -84,6 +84,52 @@ def test_coarse_base_adds_the_displacement_to_the_body_or_the_skinned_garment():
         run_tiers(body, pair, poses, transl, zero, coarse_base="hips")
 
 
+def test_contact_features_let_a_model_see_and_undo_what_skinning_puts_into_the_body():
+    """The contact features are measured at the coarse base in the body under the garment; a
+    model that pushes each vertex out along them leaves fewer vertices inside than skinning.
+    With the trees built once, the post-process gives what it gives building its own."""
+    from cloth_usd.core.features import contact_features
+    from cloth_usd.core.pipeline import CoarseFeatures, contact_trees, run_tiers
+    from cloth_usd.core.postprocess import push_out_of_surface
+    from cloth_usd.core.skinning import skin_garment
+    from cloth_usd.errors import ArgumentError
+
+    body = load_body_model()
+    betas = np.zeros(10)
+    rest, faces = make_tshirt(body, betas, TShirtParams(target_vertices=600))
+    pair = prepare_pair(body, betas, rest, faces, find_bundle("tshirt").fit)
+    poses, transl = walk_cycle(4)
+    poses[:, 3 * 16 + 2], poses[:, 3 * 17 + 2] = -1.5, 1.5  # arms pressed down into the shirt's sides
+    posed = pose_body(body, pair, poses, transl)
+    skinned = skin_garment(pair.binding, poses, transl, body.parents)
+    feats = coarse_model_features(pair, posed, transl, CoarseFeatures.CONTACT, base=skinned)
+    assert feats.shape == (4, pair.num_vertices, 11)
+    np.testing.assert_array_equal(feats[..., :7], coarse_model_features(pair, posed, transl))
+    cloud = pair.patch.contact
+    np.testing.assert_array_equal(feats[..., 7:], contact_features(skinned, posed.patch_points[:, cloud],
+                                                                   posed.patch_normals[:, cloud]))
+    inside = feats[..., 10] < 0
+    assert inside.sum() > 20  # skinning puts the arms into the shirt
+    with pytest.raises(ArgumentError, match="need the coarse base"):
+        coarse_model_features(pair, posed, transl, "contact")
+
+    def push(f, graph):  # out along the nearest body normal, to 5 mm in front of its plane
+        return f[..., 7:10] * np.maximum(0.005 - f[..., 10:11], 0.0)
+
+    raw, _ = run_tiers(body, pair, poses, transl, push, coarse_base="skinned", coarse_features="contact",
+                       postprocess=False)
+    after = contact_features(raw, posed.patch_points[:, cloud], posed.patch_normals[:, cloud])
+    assert (after[..., 3] < 0).sum() < 0.5 * inside.sum()
+    got, moved = run_tiers(body, pair, poses, transl, push, coarse_base="skinned", coarse_features="contact")
+    want, want_moved = push_out_of_surface(raw, posed.patch_points, posed.patch_normals, pair.patch.faces, cloud,
+                                           rings=pair.patch.rings)
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(moved, want_moved)
+    shared, _ = push_out_of_surface(raw, posed.patch_points, posed.patch_normals, pair.patch.faces, cloud,
+                                    trees=contact_trees(pair, posed))
+    np.testing.assert_array_equal(shared, want)
+
+
 def test_the_body_under_a_shirt_includes_the_inner_arms_that_hang_against_it():
     """The post-process looks for the body under a garment among these vertices: a torso's
     garment meets the upper arms only when they hang, so they count with the arms lowered."""

@@ -12,7 +12,7 @@ torch = pytest.importorskip("torch", reason="training needs torch (pip install '
 from train_data import TINY, one_thread  # noqa: E402,F401 (one_thread: an autouse fixture)
 
 from cloth_usd.core.heading import Heading, root_yaw  # noqa: E402
-from cloth_usd.core.pipeline import CoarseBase  # noqa: E402
+from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures  # noqa: E402
 from cloth_usd.errors import ArgumentError  # noqa: E402
 from cloth_usd.nn.data import Split  # noqa: E402
 from cloth_usd.nn.physics_train import _energy, _statistics, _Tier, physics_set, train_physics  # noqa: E402
@@ -44,6 +44,11 @@ def test_the_config_is_planned_not_simulated_with_the_heading_taken_out(planned,
     for w, c in zip(world.clips, planned.split(Split.TRAIN)):
         np.testing.assert_allclose(c.poses[:, 3:], w.poses[:, 3:])  # only the root loses its heading
     assert planned.material.bend_stiffness == pytest.approx(10.0 * world.material.bend_stiffness)
+    wide = physics_set(config_path, splits=(Split.TRAIN,), contact_margin=0.008)  # TrainConfig.contact_margin
+    assert wide.material.contact_margin == 0.008 != world.material.contact_margin
+    assert wide.material.cubic_contact_weight == pytest.approx(wide.material.contact_stiffness / 0.008)
+    with pytest.raises(ArgumentError, match="contact_margin=0"):
+        TrainConfig(contact_margin=0)
 
 
 def test_training_finds_a_garment_of_lower_energy_than_skinning(planned):
@@ -94,7 +99,9 @@ def test_the_detail_tier_trains_on_the_coarse_run_and_ships_with_it(config_path,
     from cloth_usd.nn.export import export_bundle
     from cloth_usd.runtime.bundle import load_bundle
 
-    train_physics(config_path, tmp_path / "coarse", PHYSICS, device="cpu")
+    contact = TrainConfig(**{**PHYSICS.to_json(), "coarse_features": "contact"})  # the detail run takes them
+    train_physics(config_path, tmp_path / "coarse", contact, device="cpu")
+    assert load_run(tmp_path / "coarse").model.config.in_features == 11
     detail_cfg = TrainConfig(**{**PHYSICS.to_json(), "bending_scale": 1.0, "width": 0.125})
     with pytest.raises(ArgumentError, match="detail tier needs --coarse-run"):
         train_physics(config_path, tmp_path / "detail", detail_cfg, tier="detail", device="cpu")
@@ -106,6 +113,8 @@ def test_the_detail_tier_trains_on_the_coarse_run_and_ships_with_it(config_path,
     out = export_bundle(tmp_path / "coarse", tmp_path / "detail", config_path, tmp_path / "bundle", name="phys-pair")
     bundle = load_bundle(out)
     assert Tier.DETAIL in bundle.tiers and bundle.manifest["metrics"]["export_parity"]["detail_max_m"] < 1e-4
+    assert bundle.coarse_features is CoarseFeatures.CONTACT
+    assert bundle.manifest["models"]["coarse"]["features"] == "contact"
 
 
 def test_the_supervised_trainer_refuses_the_physics_objective(tmp_path):

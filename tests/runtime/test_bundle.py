@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cloth_usd.core.pipeline import CoarseBase
+from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures
 from cloth_usd.core.scene import Category, Tier
 from cloth_usd.errors import ArgumentError, BundleError, ClothUsdError
 from cloth_usd.runtime import find_bundle, load_bundle
@@ -44,6 +44,10 @@ def test_round_trip(tmp_path, fake_exported):
     del m["models"]["coarse"]["base"]  # a bundle from before the field: METHOD.md's base
     (folder / "manifest.json").write_text(json.dumps(m))
     assert load_bundle(folder).coarse_base is CoarseBase.BODY
+    assert m["models"]["coarse"]["features"] == "body"
+    del m["models"]["coarse"]["features"]  # a bundle from before the field (tshirt-v1..v5): docs/method.md's features
+    (folder / "manifest.json").write_text(json.dumps(m))
+    assert load_bundle(folder).coarse_features is CoarseFeatures.BODY
     coarse_only = load_bundle(write_tiny_bundle(tmp_path / "c", fake_exported, detail=False))
     assert coarse_only.tiers == (Tier.COARSE,)
     with pytest.raises(BundleError, match="no 'detail' model"):
@@ -56,9 +60,10 @@ def test_skinned_coarse_base_is_recorded(tmp_path, fake_exported):
     coarse, det, fit, configs = fake_exported
     folder = write_bundle(tmp_path / "s", name="s", category="tshirt", coarse_onnx=coarse, detail_onnx=det,
                           fit_npz=fit, configs=configs, training_data={}, metrics={}, opset=18,
-                          coarse_base="skinned")
+                          coarse_base="skinned", coarse_features="contact")
     assert load_bundle(folder).coarse_base is CoarseBase.SKINNED
-    assert "base" not in json.loads((folder / "manifest.json").read_text())["models"]["detail"]
+    assert load_bundle(folder).coarse_features is CoarseFeatures.CONTACT
+    assert {"base", "features"}.isdisjoint(json.loads((folder / "manifest.json").read_text())["models"]["detail"])
 
 
 def test_find_bundle_by_category(tmp_path, fake_exported):
@@ -112,6 +117,8 @@ def test_missing_file(tmp_path, fake_exported):
     (lambda m: m["models"]["coarse"].update(inputs=["x"]), "do not match this runtime"),
     (lambda m: m["files"].update({"../evil": "0"}), "plain relative name"),
     (lambda m: m["models"]["coarse"].update(base="hips"), "models.coarse.base 'hips' is not one of body, skinned"),
+    (lambda m: m["models"]["coarse"].update(features="cloth"),
+     "models.coarse.features 'cloth' is not one of body, contact"),
 ])
 def test_bad_manifest(tmp_path, fake_exported, edit, expect):
     folder = write_tiny_bundle(tmp_path / "b", fake_exported)
@@ -142,7 +149,7 @@ def test_the_shipped_tshirt_bundle_verifies_and_records_its_evaluation():
     from cloth_usd.runtime.bundle import default_bundle_dir, find_bundle
 
     bundle = find_bundle("tshirt")
-    assert bundle is not None and bundle.path.parent == default_bundle_dir() and bundle.name == "tshirt-v5"
+    assert bundle is not None and bundle.path.parent == default_bundle_dir() and bundle.name == "tshirt-v6"
     assert bundle.heading.value == "canonical"
     evaluation = json.loads((bundle.path / "manifest.json").read_text())["metrics"]["evaluation"]
     assert evaluation["same_models"] is True and evaluation["rows"]  # measured on these very ONNX files
