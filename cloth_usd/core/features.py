@@ -18,6 +18,7 @@ import numpy as np
 from scipy import sparse
 
 from ..errors import ArgumentError
+from .postprocess import nearest_vertex
 from .smpl import NUM_JOINTS
 
 __all__ = ["vertex_normals", "coarse_features", "contact_features", "detail_features", "attributes",
@@ -113,8 +114,9 @@ def contact_features(points: np.ndarray, body_points: np.ndarray, body_normals: 
         body_points: (T, K, 3) the candidate posed body vertices [m] (the body under the garment).
         body_normals: (T, K, 3) their unit outward normals.
         reach: search radius [m].
-        trees: T ``scipy.spatial.cKDTree`` over each frame's ``body_points``, when the caller
-            built them already (the post-process searches the same body).
+        trees: T :func:`~cloth_usd.core.postprocess.search_tree` over each frame's
+            ``body_points``, when the caller built them already (the post-process searches the
+            same body).
     Returns:
         (T, N, 4) float64: normal (3), signed distance [m] (1).
     """
@@ -125,20 +127,13 @@ def contact_features(points: np.ndarray, body_points: np.ndarray, body_normals: 
             or b.shape[1] == 0 or (trees is not None and len(trees) != p.shape[0]):
         raise ArgumentError(f"points (T, N, 3), body_points and body_normals (T, K, 3) with K > 0 (and T trees) "
                             f"expected, got {p.shape}, {b.shape}, {n.shape}")
-    from scipy.spatial import cKDTree
-
-    out = np.zeros(p.shape[:2] + (CONTACT_FEATURES,))
-    out[..., 3] = reach
-    for t in range(p.shape[0]):
-        rows = np.flatnonzero(np.isfinite(p[t]).all(axis=1))
-        tree = trees[t] if trees is not None else cKDTree(b[t])
-        index = tree.query(p[t, rows], distance_upper_bound=reach)[1]
-        found = index < b.shape[1]
-        rows, index = rows[found], index[found]
-        normal = n[t, index]
-        out[t, rows, :3] = normal
-        out[t, rows, 3] = np.einsum("rc,rc->r", p[t, rows] - b[t, index], normal)
-    return out
+    index = nearest_vertex(p, b, reach=reach, trees=trees)
+    found = index < b.shape[1]
+    rows, index = np.arange(p.shape[0])[:, None], np.where(found, index, 0)
+    normal = n[rows, index] * found[..., None]
+    with np.errstate(invalid="ignore"):  # a non-finite point reads as far; its NaN is dropped below
+        distance = np.einsum("tnc,tnc->tn", p - b[rows, index], normal)
+    return np.concatenate([normal, np.where(found, distance, reach)[..., None]], axis=-1)
 
 
 def detail_features(coarse: np.ndarray, garment_faces: np.ndarray, posed_joints: np.ndarray,

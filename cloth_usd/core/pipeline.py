@@ -38,7 +38,7 @@ from .features import (CONTACT_FEATURES, COARSE_FEATURES, attributes, coarse_fea
 from .fit import FitModel, pair_distances
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
-from .postprocess import DEFAULT_MARGIN, push_out_of_surface
+from .postprocess import DEFAULT_MARGIN, push_out_of_surface, search_tree
 from .scene import Category
 from .skinning import SkinBinding, bind_worn, skin_garment
 from .smpl import JOINT_NAMES
@@ -270,12 +270,9 @@ def pose_body(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
 
 
 def contact_trees(pair: GarmentPair, posed: PosedBody) -> list:
-    """A ``scipy.spatial.cKDTree`` per frame over the posed body under the garment
-    (:attr:`BodyPatch.contact`): what the contact features and the post-process search."""
-    from scipy.spatial import cKDTree
-
-    cloud = posed.patch_points[:, pair.patch.contact]
-    return [cKDTree(c, leafsize=32, balanced_tree=False, compact_nodes=False) for c in cloud]  # 1/5 faster here
+    """A :func:`~cloth_usd.core.postprocess.search_tree` per frame over the posed body under the
+    garment (:attr:`BodyPatch.contact`): what the contact features and the post-process search."""
+    return [search_tree(c) for c in posed.patch_points[:, pair.patch.contact]]
 
 
 def coarse_model_features(pair: GarmentPair, posed: PosedBody, transl: np.ndarray,
