@@ -5,7 +5,7 @@ Training: :func:`cloth_usd.nn.train.train` (``cloth-usd train``) on data from
 :mod:`cloth_usd.nn.data`; bundles: :func:`cloth_usd.nn.export.export_bundle`
 (``cloth-usd export``)."""
 
-from .layers import GATBlock, gather_nodes, masked_softmax, pool_mean, unpool
+from .layers import GATBlock, gather_nodes, pad_table, pool_mean, slot_softmax, unpool
 from .models import (
     AttributeParser,
     CoarseConfig,
@@ -17,7 +17,7 @@ from .models import (
 )
 
 __all__ = [
-    "GATBlock", "gather_nodes", "masked_softmax", "pool_mean", "unpool",
+    "GATBlock", "gather_nodes", "pad_table", "pool_mean", "slot_softmax", "unpool",
     "AttributeParser", "CoarseConfig", "CoarseGenerator", "DetailConfig", "DetailGenerator",
     "DisplacementHead", "ParserConfig", "export_coarse", "export_detail", "export_bundle",
     "TrainConfig", "load_run",

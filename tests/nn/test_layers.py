@@ -1,4 +1,4 @@
-"""GAT block, masked softmax, pooling: padded tables against the scatter reference."""
+"""GAT block, padded table, softmax over slots, pooling: padded tables against the scatter reference."""
 
 from __future__ import annotations
 
@@ -12,9 +12,12 @@ from meshes import grid, icosphere  # noqa: E402
 from cloth_usd.core.graph import build_graph, directed_edges, neighbour_table  # noqa: E402
 from cloth_usd.nn.layers import (  # noqa: E402
     GATBlock,
+    EXP_FLOOR,
+    MASKED_LOGIT,
     gat_scatter_reference,
-    masked_softmax,
+    pad_table,
     pool_mean,
+    slot_softmax,
     unpool,
 )
 
@@ -62,18 +65,29 @@ def test_isolated_vertex_output_is_finite_and_self_only():
     torch.testing.assert_close(out[:, 3, 4:], block.bias.expand(2, 4))  # aggregates nothing
 
 
-def test_masked_softmax_rows():
-    scores = torch.tensor([[1.0, 2.0, 3.0], [5.0, -1e30, 7.0], [1.0, 2.0, 3.0]])
-    mask = torch.tensor([[True, True, False], [True, False, True], [False, False, False]])
-    w = masked_softmax(scores, mask, dim=1)
-    torch.testing.assert_close(w[0], torch.tensor([1 / (1 + np.e), np.e / (1 + np.e), 0.0]))
-    assert w[1, 1] == 0 and torch.isclose(w[1].sum(), torch.tensor(1.0))
-    assert (w[2] == 0).all()
+def test_pad_table_points_masked_slots_at_the_pad_node():
+    nbr = torch.tensor([[1, 2, 0], [0, 0, 0], [1, 0, 0]])
+    mask = torch.tensor([[True, True, False], [False, False, False], [True, False, False]])
+    assert pad_table(nbr, mask, 3).tolist() == [[1, 2, 3], [3, 3, 3], [1, 3, 3]]
 
 
-def test_masked_softmax_extreme_scores_stay_finite():
+def test_slot_softmax_rows():
+    scores = torch.tensor([[1.0, 2.0], [5.0, 7.0], [0.0, MASKED_LOGIT]])
+    w = slot_softmax(scores, dim=1)
+    torch.testing.assert_close(w[0], torch.tensor([1 / (1 + np.e), np.e / (1 + np.e)]))
+    torch.testing.assert_close(w.sum(1), torch.ones(3))
+    assert w[2, 0] == 1.0 and 0 < w[2, 1] <= np.exp(-EXP_FLOOR)  # floored: tiny, never an underflowing exp
+
+
+def test_slot_softmax_along_slots_of_a_slot_major_tensor():
+    torch.manual_seed(4)
+    scores = torch.randn(2, 5, 7, 3, dtype=torch.float64)  # (B, K, N, H)
+    torch.testing.assert_close(slot_softmax(scores, dim=1), torch.softmax(scores, dim=1))
+
+
+def test_slot_softmax_extreme_scores_stay_finite():
     scores = torch.tensor([[1e30, -1e30, 3e38], [-3e38, -3e38, 0.0]])
-    w = masked_softmax(scores, torch.ones(2, 3, dtype=torch.bool), dim=1)
+    w = slot_softmax(scores, dim=1)
     assert torch.isfinite(w).all()
     torch.testing.assert_close(w.sum(1), torch.ones(2))
 
