@@ -30,8 +30,7 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .core.body import BodyModel
-from .core.heading import Heading
-from .core.pipeline import CoarseBase, CoarseFeatures, run_tiers
+from .core.pipeline import CoarseForm, run_tiers
 from .core.skinning import skin_garment
 from .datagen.floor import floor_report
 from .errors import ArgumentError
@@ -197,8 +196,8 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         log.warning("%s: the bundle was trained on another data set (manifest sha256 %s...)", data_dir,
                     str(trained_on)[:12])
     shipped_coarse = _session_coarse_fn(bundle_obj.session("coarse"))
-    # (label, models for run_tiers, their base, heading and coarse features)
-    runs: list[tuple[str, tuple, CoarseBase, Heading, CoarseFeatures]] = []
+    # (label, models for run_tiers, how they run)
+    runs: list[tuple[str, tuple, CoarseForm]] = []
     ablations: dict[str, dict] = {}
     if ablation_runs:
         from .nn.inference import pick_device, torch_coarse_fn, torch_detail_fn
@@ -221,11 +220,9 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
                     log.warning("%s: trained on another coarse model than the bundle's", run.path)
             ablations[label] = record
             if run.tier.value == "detail":  # on the bundle's coarse model
-                runs.append((label, (shipped_coarse, torch_detail_fn(run.model, dev)), bundle_obj.coarse_base,
-                             bundle_obj.heading, bundle_obj.coarse_features))
+                runs.append((label, (shipped_coarse, torch_detail_fn(run.model, dev)), bundle_obj.form))
             else:
-                runs.append((label, (torch_coarse_fn(run.model, dev),), run.config.coarse_base, run.config.heading,
-                             run.config.coarse_features))
+                runs.append((label, (torch_coarse_fn(run.model, dev),), run.config.coarse_form))
     tiers = ["skinning", "coarse"] + (["detail"] if "detail" in [t.value for t in bundle_obj.tiers] else []) \
         + [label for label, *_ in runs]
     test_garment = [c.meta for c in clips if c.split.value == "test_garment"]
@@ -253,10 +250,9 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         for tier in ("coarse", "detail"):
             if tier in tiers:
                 outputs[tier] = learned.evaluate(tier, clip.poses, clip.transl, batch_size=batch_size).points
-        for label_, models, base, heading, features in runs:
+        for label_, models, form in runs:
             outputs[label_] = run_tiers(body, learned.pair, clip.poses, clip.transl, *models, batch_size=batch_size,
-                                        margin=learned.margin, coarse_base=base, heading=heading,
-                                        coarse_features=features)[0]
+                                        margin=learned.margin, form=form)[0]
         for tier, pts in outputs.items():
             err = np.linalg.norm(pts - truth, axis=-1) * 1000.0
             for key, _ in keys:
@@ -277,8 +273,8 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
     metrics = {
         "format": REPORT_FORMAT,
         "bundle": {"path": str(Path(bundle).resolve()), "name": bundle_obj.name, "sha256": bundle_obj.sha256,
-                   "files": dict(bundle_obj.manifest["files"]), "coarse_base": bundle_obj.coarse_base.value,
-                   "heading": bundle_obj.heading.value, "coarse_features": bundle_obj.coarse_features.value},
+                   "files": dict(bundle_obj.manifest["files"]), "coarse_base": bundle_obj.form.base.value,
+                   "heading": bundle_obj.form.heading.value, "coarse_features": bundle_obj.form.features.value},
         "data": {"path": str(Path(data_dir).resolve()), "manifest_sha256": data.manifest_sha256,
                  "same_as_training": trained_on == data.manifest_sha256, "max_frames": max_frames},
         "error": "Euclidean distance of each garment vertex to the simulated one, every frame [mm]; "

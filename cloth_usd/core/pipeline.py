@@ -13,8 +13,9 @@ these functions, so a model is trained on exactly the features it is later run o
   :class:`CoarseFeatures`, as it was trained);
 - :func:`run_tiers`: coarse model -> ``M_coarse`` -> detail model -> ``M_detail`` ->
   post-process, with the models passed in as callables (an onnxruntime session or a
-  torch module). The coarse model's displacement is added to a :class:`CoarseBase`: the
-  associated body vertices (docs/method.md) or the skinned garment. With
+  torch module), run as they were trained (:class:`CoarseForm`). The coarse model's
+  displacement is added to a :class:`CoarseBase`: the associated body vertices
+  (docs/method.md) or the skinned garment. With
   :attr:`~cloth_usd.core.heading.Heading.CANONICAL` the models see the body turned to face
   +Z and their garment is turned back (:mod:`cloth_usd.core.heading`).
 
@@ -45,7 +46,7 @@ from .smpl import JOINT_NAMES
 
 __all__ = ["GarmentPair", "BodyPatch", "body_patch", "body_under", "swinging_parts", "SWINGING_JOINTS", "CONTACT_REACH",
            "PosedBody", "prepare_pair", "pose_body", "coarse_model_features", "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn",
-           "CoarseBase", "coarse_base_points", "CoarseFeatures", "coarse_feature_count",
+           "CoarseBase", "coarse_base_points", "CoarseFeatures", "coarse_feature_count", "CoarseForm",
            "contact_trees"]
 
 #: A coarse model: ``(features (B, N, F), graph) -> delta (B, N, 3) [m]`` (F: :func:`coarse_feature_count`).
@@ -79,6 +80,26 @@ class CoarseFeatures(str, enum.Enum):
 def coarse_feature_count(kind: CoarseFeatures | str) -> int:
     """F, the coarse model's node features of ``kind``."""
     return COARSE_FEATURES + (CONTACT_FEATURES if CoarseFeatures(kind) is CoarseFeatures.CONTACT else 0)
+
+
+@dataclass(frozen=True)
+class CoarseForm:
+    """How a bundle's models were trained, so how they must be run: one record for the three
+    choices of the coarse model that :func:`run_tiers` follows (a bundle's
+    ``models.coarse.base``, ``heading`` and ``features``). Values may be given as the enums'
+    strings; an unknown one raises ValueError."""
+
+    base: CoarseBase = CoarseBase.BODY
+    """What the coarse displacement is added to."""
+    heading: Heading = Heading.WORLD
+    """The frame the models see the body in."""
+    features: CoarseFeatures = CoarseFeatures.BODY
+    """The coarse model's node features."""
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "base", CoarseBase(self.base))
+        object.__setattr__(self, "heading", Heading(self.heading))
+        object.__setattr__(self, "features", CoarseFeatures(self.features))
 
 
 @dataclass(frozen=True)
@@ -333,14 +354,12 @@ def coarse_base_points(body: BodyModel, pair: GarmentPair, posed: PosedBody, pos
 
 def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray,
               coarse: CoarseFn, detail: DetailFn | None = None, *, batch_size: int = 16,
-              margin: float = DEFAULT_MARGIN, coarse_base: CoarseBase | str = CoarseBase.BODY,
-              heading: Heading | str = Heading.WORLD,
-              skinned: np.ndarray | None = None, postprocess: bool = True,
-              coarse_features: CoarseFeatures | str = CoarseFeatures.BODY) -> tuple[np.ndarray, np.ndarray]:
+              margin: float = DEFAULT_MARGIN, form: CoarseForm = CoarseForm(),
+              skinned: np.ndarray | None = None, postprocess: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Animate a garment with a coarse model and, if given, a detail model.
 
     ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
-    ``coarse_base``, as the coarse model was trained), ``M_detail = M_coarse + detail(...)``,
+    ``form.base``, as the coarse model was trained), ``M_detail = M_coarse + detail(...)``,
     then the post-process (:func:`~cloth_usd.core.postprocess.push_out_of_surface`, against
     the body under the garment (:attr:`BodyPatch.contact`) nearest to each garment vertex in
     that frame, and the surface there).
@@ -350,7 +369,7 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
         coarse, detail: the models (see :data:`CoarseFn`, :data:`DetailFn`).
         batch_size: frames per model call.
         margin: the post-process clearance [m].
-        heading: :class:`~cloth_usd.core.heading.Heading`, as the models were trained.
+        form: the models' :class:`CoarseForm` (base, heading, coarse features), as they were trained.
         skinned: (T, N, 3) float64 the skinned garment of these frames [m], world frame
             (:func:`~cloth_usd.core.skinning.skin_garment` of ``poses``, ``transl``), when the
             caller has it already (the baker's guard needs it too): the skinned coarse base
@@ -358,31 +377,30 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
             one, instead of skinning every frame again. Unused with a body base.
         postprocess: False leaves the models' garment as they made it (what the post-process
             starts from: how far into the body they put it); ``moved`` is then all zero.
-        coarse_features: :class:`CoarseFeatures`, as the coarse model was trained.
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the garment per frame and
         how many vertices the post-process moved in each.
     """
     num_t, n = poses.shape[0], pair.num_vertices
-    if CoarseBase(coarse_base) is not CoarseBase.SKINNED:
+    if form.base is not CoarseBase.SKINNED:
         skinned = None
     elif skinned is not None:
         skinned = np.asarray(skinned, dtype=np.float64)
         if skinned.shape != (num_t, n, 3):
             raise ArgumentError(f"skinned: expected ({num_t}, {n}, 3) for {num_t} frames of {n} vertices, "
                                 f"got {skinned.shape}")
-    frame = heading_frame(poses, transl, pair.joints[0]) if Heading(heading) is Heading.CANONICAL else None
+    frame = heading_frame(poses, transl, pair.joints[0]) if form.heading is Heading.CANONICAL else None
     if frame is not None:
         poses = frame.canonical_poses(poses)
         if skinned is not None:
             skinned = frame.to_canonical(skinned)
-    kind = CoarseFeatures(coarse_features)
+    kind = form.features
     points = np.empty((num_t, n, 3))
     moved = np.zeros(num_t, dtype=np.int64)
     for lo in range(0, num_t, batch_size):
         hi = min(lo + batch_size, num_t)
         posed = pose_body(body, pair, poses[lo:hi], transl[lo:hi])
-        base = coarse_base_points(body, pair, posed, poses[lo:hi], transl[lo:hi], coarse_base,
+        base = coarse_base_points(body, pair, posed, poses[lo:hi], transl[lo:hi], form.base,
                                   skinned=None if skinned is None else skinned[lo:hi])
         trees = contact_trees(pair, posed) if kind is CoarseFeatures.CONTACT else None  # searched twice, built once
         m = base + coarse(coarse_model_features(pair, posed, transl[lo:hi], kind, base=base, trees=trees), pair.graph)

@@ -13,7 +13,7 @@ import torch
 
 from ..core.files import read_config
 from ..core.heading import Heading
-from ..core.pipeline import CoarseBase, CoarseFeatures, coarse_feature_count
+from ..core.pipeline import CoarseBase, CoarseFeatures, CoarseForm, coarse_feature_count
 from ..core.scene import Tier
 from ..errors import ArgumentError
 from .data import CoarseTarget
@@ -150,6 +150,12 @@ class TrainConfig:
         bad = [k for k, ok in checks.items() if not ok]
         if bad:
             raise ArgumentError(f"TrainConfig: out of range: {', '.join(f'{k}={getattr(self, k)!r}' for k in bad)}")
+
+    @property
+    def coarse_form(self) -> CoarseForm:
+        """A coarse run's :class:`~cloth_usd.core.pipeline.CoarseForm`: how its model is run
+        (``coarse_base``, ``heading``, ``coarse_features``)."""
+        return CoarseForm(self.coarse_base, self.heading, self.coarse_features)
 
     def to_json(self) -> dict:
         return {k: v.value if isinstance(v, enum.Enum) else v for k, v in dataclasses.asdict(self).items()}

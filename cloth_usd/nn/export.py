@@ -18,15 +18,19 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ..core.features import ATTRIBUTE_FEATURES
 from ..core.graph import build_graph
-from ..core.heading import Heading
-from ..core.pipeline import CoarseBase, CoarseFeatures
+from ..core.pipeline import CoarseForm
 from ..runtime.io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT, detail_inputs
-from .models import ATTRIBUTE_FEATURES, CoarseGenerator, DetailGenerator
+from .models import CoarseGenerator, DetailGenerator
 
 __all__ = ["OPSET", "export_coarse", "export_detail", "export_bundle"]
 
 OPSET = 18
+#: The node metadata torch's exporter fills with the exporting machine's source paths and
+#: line numbers: dropped, so an export's bytes depend on the model alone (the bundle's
+#: sha256 then names the same file for the same graph and weights, whichever checkout made it).
+STACK_TRACE = "pkg.torch.onnx.stack_trace"
 
 
 def _example(model: CoarseGenerator | DetailGenerator) -> tuple[dict[str, torch.Tensor], int]:
@@ -61,6 +65,8 @@ def _export(model: torch.nn.Module, names: tuple[str, ...], path: Path,
         program = torch.onnx.export(model, args, input_names=list(names), output_names=[OUTPUT],
                                     dynamic_shapes=dynamic, opset_version=OPSET, dynamo=True,
                                     optimize=True, verbose=False)
+    for node in program.model.graph.all_nodes():  # the source paths and lines of the export's machine
+        node.metadata_props.pop(STACK_TRACE, None)
     program.save(str(path))
     return path
 
@@ -86,9 +92,7 @@ def export_detail(model: DetailGenerator, path: str | Path) -> Path:
 
 
 def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | None, clips, body,
-            frames: int, coarse_base: CoarseBase | str = CoarseBase.BODY,
-            heading: Heading | str = Heading.WORLD,
-            coarse_features: CoarseFeatures | str = CoarseFeatures.BODY) -> dict:
+            frames: int, form: CoarseForm = CoarseForm()) -> dict:
     """Largest point difference [m] between the torch models and their ONNX files, through
     the runtime's pipeline (:func:`cloth_usd.core.pipeline.run_tiers`), on ``clips``."""
     from ..core.pipeline import run_tiers
@@ -118,10 +122,9 @@ def _parity(coarse_torch, detail_torch, coarse_onnx: Path, detail_onnx: Path | N
             if tier == "detail" and t_detail is None:
                 continue
             want, _ = run_tiers(body, clip.pair, poses, transl, t_coarse, t_detail if tier == "detail" else None,
-                                coarse_base=coarse_base, heading=heading, coarse_features=coarse_features)
+                                form=form)
             got, _ = run_tiers(body, clip.pair, poses, transl, onnx_coarse,
-                               onnx_detail if tier == "detail" else None, coarse_base=coarse_base, heading=heading,
-                               coarse_features=coarse_features)
+                               onnx_detail if tier == "detail" else None, form=form)
             worst[tier] = max(worst[tier], float(np.abs(got - want).max()))
     return {"coarse_max_m": worst["coarse"], "detail_max_m": worst["detail"] if t_detail is not None else None,
             "sequences": len(clips), "frames": used}
@@ -225,8 +228,7 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         coarse_path = export_coarse(coarse.model, tmp / "coarse.onnx")
         detail_path = export_detail(detail.model, tmp / "detail.onnx") if detail is not None else None
         parity = _parity(coarse.model, detail.model if detail else None, coarse_path, detail_path, clips,
-                         body, parity_frames, coarse.config.coarse_base, coarse.config.heading,
-                         coarse.config.coarse_features)
+                         body, parity_frames, coarse.config.coarse_form)
         worst = max(v for v in (parity["coarse_max_m"], parity["detail_max_m"]) if v is not None)
         if not worst <= tolerance:
             raise ClothUsdError(f"export parity failed: ONNX and torch differ by {worst * 1000:.4f} mm on the "
@@ -248,8 +250,7 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         out = write_bundle(out_dir, name=name, category=category, coarse_onnx=coarse_path,
                            detail_onnx=detail_path, fit_npz=fit_npz, configs=configs,
                            training_data=training, metrics=summary, opset=OPSET, force=force,
-                           coarse_base=coarse.config.coarse_base, heading=coarse.config.heading,
-                           coarse_features=coarse.config.coarse_features)
+                           form=coarse.config.coarse_form)
     load_bundle(out)
     return out
 

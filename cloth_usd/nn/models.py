@@ -26,6 +26,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from ..core.features import ATTRIBUTE_FEATURES, COARSE_FEATURES, DETAIL_FEATURES
 from .layers import GATBlock, pool_mean, unpool
 
 __all__ = [
@@ -36,17 +37,8 @@ __all__ = [
     "AttributeParser",
     "DetailGenerator",
     "DisplacementHead",
-    "COARSE_FEATURES",
-    "DETAIL_FEATURES",
-    "ATTRIBUTE_FEATURES",
 ]
 
-#: Coarse node features: body normal (3), body position without root translation (3), fit a1 (1).
-COARSE_FEATURES = 7
-#: Detail node features: normal (3), position without root translation (3), 24 joint distances.
-DETAIL_FEATURES = 30
-#: Parser input: fit alpha (3) + SMPL beta (10) + pose theta (72).
-ATTRIBUTE_FEATURES = 85
 #: The guard of the direction normalisation d / max(|d|, EPS) (docs/method.md).
 DIRECTION_EPS = 1e-6
 #: Heads of every GAT block.

@@ -721,10 +721,8 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
     coarse = load_run(coarse_run, device=dev) if coarse_run is not None else None
     if coarse is not None and coarse.tier is not Tier.COARSE:
         raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run, not a coarse one")
-    heading = coarse.config.heading if coarse is not None else config.heading
-    base = coarse.config.coarse_base if coarse is not None else config.coarse_base
-    features = coarse.config.coarse_features if coarse is not None else config.coarse_features
-    data = physics_set(config_path, body, heading=heading, splits=(Split.TRAIN, Split.VAL),
+    form = (coarse.config if coarse is not None else config).coarse_form  # a detail run runs as its coarse run
+    data = physics_set(config_path, body, heading=form.heading, splits=(Split.TRAIN, Split.VAL),
                        max_frames=config.max_frames or None, bending_scale=config.bending_scale,
                        contact_margin=config.contact_margin,
                        mocap_dir=mocap_dir, sim_data=sim_data,
@@ -736,7 +734,7 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
         raise ArgumentError(f"{config_path}: no training sequence has {len(options.window)} frames for the "
                             "dynamic objective's window (raise max_frames)")
     tensors = _Tensors(dev)
-    step = _Tier(tier, body, base, tensors, coarse.model if coarse is not None else None, features)
+    step = _Tier(tier, body, form.base, tensors, coarse.model if coarse is not None else None, form.features)
     torch.manual_seed(config.seed)
     model = build_model(tier, config).to(dev)
     _statistics(model, step, train_clips, config)

@@ -229,8 +229,8 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
         raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run, not a coarse one")
     data = dataset if dataset is not None else load_dataset(
         data_dir, (Split.TRAIN, Split.VAL), body=body, max_frames=config.max_frames or None)
-    heading = coarse.config.heading if coarse is not None else config.heading
-    data = with_heading(with_coarse_target(data, config.coarse_target), heading)
+    form = (coarse.config if coarse is not None else config).coarse_form  # a detail run runs as its coarse run
+    data = with_heading(with_coarse_target(data, config.coarse_target), form.heading)
     train_clips, val_clips = data.split(Split.TRAIN), data.split(Split.VAL)
     if not train_clips:
         raise ArgumentError(f"--data {data_dir}: no accepted training sequences")
@@ -242,10 +242,10 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
                      "train_sequences": len(train_clips), "val_sequences": len(val_clips)},
             "coarse_run": coarse_run_record(coarse) if coarse is not None else None,
             "body_model_sha256": data.body.sha256, "torch": torch.__version__}
-    base = coarse.config.coarse_base if coarse is not None else config.coarse_base
-    features = coarse.config.coarse_features if coarse is not None else config.coarse_features
-    examples = _Examples(tier, data.body, train_clips, config, coarse.model if coarse else None, dev, base, features)
-    val_examples = _Examples(tier, data.body, val_clips, config, coarse.model if coarse else None, dev, base, features)
+    examples = _Examples(tier, data.body, train_clips, config, coarse.model if coarse else None, dev, form.base,
+                         form.features)
+    val_examples = _Examples(tier, data.body, val_clips, config, coarse.model if coarse else None, dev, form.base,
+                             form.features)
 
     torch.manual_seed(config.seed)
     model = build_model(tier, config).to(dev)

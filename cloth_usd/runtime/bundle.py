@@ -29,7 +29,7 @@ from typing import Any, Iterable, Mapping
 from ..core.files import file_sha256, models_dir
 from ..core.fit import FitModel
 from ..core.heading import Heading
-from ..core.pipeline import CoarseBase, CoarseFeatures
+from ..core.pipeline import CoarseBase, CoarseFeatures, CoarseForm
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError, BundleError, ClothUsdError
 from .io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT
@@ -70,15 +70,12 @@ class ModelBundle:
     """The parsed manifest."""
     fit: FitModel
     """The fit attribute's factor-analysis model."""
-    coarse_base: CoarseBase = CoarseBase.BODY
-    """What the coarse model's displacement is added to (manifest ``models.coarse.base``;
-    bundles without the field: ``body``, docs/method.md's)."""
-    heading: Heading = Heading.WORLD
-    """The frame the models see the body in (manifest ``models.coarse.heading``; bundles
-    without the field: ``world``, as tshirt-v1..v3 were trained)."""
-    coarse_features: CoarseFeatures = CoarseFeatures.BODY
-    """The coarse model's node features (manifest ``models.coarse.features``; bundles without
-    the field: ``body``, as tshirt-v1..v5 were trained)."""
+    form: CoarseForm = CoarseForm()
+    """How the models were trained, so how they are run: the manifest's ``models.coarse.base``
+    (what the coarse displacement is added to; bundles without the field: ``body``,
+    docs/method.md's), ``models.coarse.heading`` (the frame the models see the body in;
+    without it ``world``, as tshirt-v1..v3 were trained) and ``models.coarse.features`` (the
+    coarse model's node features; without it ``body``, as tshirt-v1..v5 were trained)."""
     _sessions: dict = field(default_factory=dict, repr=False)
 
     def model_path(self, tier: Tier) -> Path:
@@ -193,8 +190,7 @@ def load_bundle(path: str | Path) -> ModelBundle:
         raise BundleError(f"{folder}: bundle file {fit_file} is not a fit model ({exc})") from exc
     return ModelBundle(path=folder, name=name, category=category, tiers=tiers,
                        sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit,
-                       coarse_base=CoarseBase(base), heading=Heading(heading),
-                       coarse_features=CoarseFeatures(features))
+                       form=CoarseForm(base, heading, features))
 
 
 #: In a folder of bundles: ``{"<category>": "<bundle folder>"}``, the bundle tried first for a
@@ -274,9 +270,7 @@ def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | No
 def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, coarse_onnx: str | Path,
                  detail_onnx: str | Path | None, fit_npz: str | Path, configs: Mapping[str, Any],
                  training_data: Mapping[str, Any], metrics: Mapping[str, Any], opset: int,
-                 force: bool = False, coarse_base: CoarseBase | str = CoarseBase.BODY,
-                 heading: Heading | str = Heading.WORLD,
-                 coarse_features: CoarseFeatures | str = CoarseFeatures.BODY) -> Path:
+                 force: bool = False, form: CoarseForm = CoarseForm()) -> Path:
     """Copy exported models and the fit model into a new bundle folder and write its manifest.
 
     Args:
@@ -289,9 +283,8 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         training_data: ``{"manifest_sha256": ..., "description": ...}``.
         metrics: validation metrics (JSON-able), e.g. mean vertex error [mm].
         opset: the ONNX opset of the exported files.
-        coarse_base: what the coarse model's displacement is added to, as it was trained.
-        heading: the frame the models were trained to see the body in.
-        coarse_features: the coarse model's node features, as it was trained.
+        form: how the models were trained (base, heading, coarse features), recorded in
+            ``models.coarse``.
     Returns:
         The bundle folder.
     """
@@ -322,9 +315,8 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         models[tier.value] = {"file": _FILES[tier], "inputs": list(_INPUTS[tier]), "outputs": [OUTPUT],
                               "config": dict(configs.get(tier.value, {}))}
         if tier is Tier.COARSE:
-            models[tier.value]["base"] = CoarseBase(coarse_base).value
-            models[tier.value]["heading"] = Heading(heading).value
-            models[tier.value]["features"] = CoarseFeatures(coarse_features).value
+            models[tier.value].update(base=form.base.value, heading=form.heading.value,
+                                      features=form.features.value)
         tiers.append(tier.value)
     shutil.copyfile(fit_npz, out / _FIT)
     files[_FIT] = file_sha256(out / _FIT)

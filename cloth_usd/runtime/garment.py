@@ -122,7 +122,6 @@ class LearnedGarment:
 
         points, moved = run_tiers(self.body, self.pair, poses, transl, run_coarse,
                                   run_detail if detail is not None else None, batch_size=batch_size,
-                                  margin=self.margin, coarse_base=self.bundle.coarse_base,
-                                  heading=self.bundle.heading, skinned=skinned, postprocess=postprocess,
-                                  coarse_features=self.bundle.coarse_features)
+                                  margin=self.margin, form=self.bundle.form, skinned=skinned,
+                                  postprocess=postprocess)
         return LearnedFrames(points=points, moved=moved)

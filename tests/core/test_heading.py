@@ -6,7 +6,7 @@ from scipy.spatial.transform import Rotation
 
 from cloth_usd.core.body import lbs, load_body_model, shape_body
 from cloth_usd.core.heading import Heading, heading_frame, root_yaw, yaw_matrices
-from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures, prepare_pair, run_tiers
+from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures, CoarseForm, prepare_pair, run_tiers
 from cloth_usd.datagen import TShirtParams, make_tshirt, walk_cycle
 from cloth_usd.errors import ArgumentError
 from cloth_usd.runtime.bundle import find_bundle
@@ -81,12 +81,12 @@ def _wavy_detail(feats, attrs, graph):
 @pytest.mark.parametrize("base", list(CoarseBase))
 def test_learned_tiers_give_the_same_local_garment_at_any_heading(shirt, base, features):
     body, pair, poses, transl = shirt
-    ref, _ = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail, coarse_base=base,
-                       heading=Heading.CANONICAL, coarse_features=features)
+    ref, _ = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail,
+                       form=CoarseForm(base, Heading.CANONICAL, features))
     for deg in (0.0, 30.0, 137.0, 180.0):
         p, t, turn = _turned(poses, transl, pair.joints[0], deg)
-        got, _ = run_tiers(body, pair, p, t, _wavy_coarse, _wavy_detail, coarse_base=base,
-                           heading=Heading.CANONICAL, coarse_features=features)
+        got, _ = run_tiers(body, pair, p, t, _wavy_coarse, _wavy_detail,
+                           form=CoarseForm(base, Heading.CANONICAL, features))
         local = turn.inv().apply(got.reshape(-1, 3)).reshape(got.shape)
         assert np.abs(local - ref).max() < 1e-5  # 1e-2 mm
 
@@ -94,9 +94,9 @@ def test_learned_tiers_give_the_same_local_garment_at_any_heading(shirt, base, f
 def test_without_the_canonical_heading_the_same_models_depend_on_it(shirt):
     """The test above is not vacuous: a world-frame run of the same models changes with heading."""
     body, pair, poses, transl = shirt
-    ref, _ = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail, heading=Heading.WORLD)
+    ref, _ = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail, form=CoarseForm(heading=Heading.WORLD))
     p, t, turn = _turned(poses, transl, pair.joints[0], 137.0)
-    got, _ = run_tiers(body, pair, p, t, _wavy_coarse, _wavy_detail, heading=Heading.WORLD)
+    got, _ = run_tiers(body, pair, p, t, _wavy_coarse, _wavy_detail, form=CoarseForm(heading=Heading.WORLD))
     local = turn.inv().apply(got.reshape(-1, 3)).reshape(got.shape)
     assert np.abs(local - ref).max() > 2e-3
 
@@ -108,15 +108,15 @@ def test_precomputed_world_skinning_is_the_skinned_base_in_either_heading(shirt,
     from cloth_usd.core.skinning import skin_garment
 
     body, pair, poses, transl = shirt
-    ref, ref_moved = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail, coarse_base=base,
-                               heading=heading, batch_size=2)
+    ref, ref_moved = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail,
+                               form=CoarseForm(base, heading), batch_size=2)
     skinned = skin_garment(pair.binding, poses, transl, body.parents)
-    got, moved = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail, coarse_base=base,
-                           heading=heading, batch_size=2, skinned=skinned)
+    got, moved = run_tiers(body, pair, poses, transl, _wavy_coarse, _wavy_detail,
+                           form=CoarseForm(base, heading), batch_size=2, skinned=skinned)
     if heading is Heading.WORLD:  # the same numbers, not merely close ones
         np.testing.assert_array_equal(got, ref)
     else:  # skinned in the world and turned, or skinned turned: round-off apart
         np.testing.assert_allclose(got, ref, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(moved, ref_moved)
     with pytest.raises(ArgumentError, match=r"skinned: expected \(5, \d+, 3\)"):
-        run_tiers(body, pair, poses, transl, _wavy_coarse, coarse_base=CoarseBase.SKINNED, skinned=skinned[:4])
+        run_tiers(body, pair, poses, transl, _wavy_coarse, form=CoarseForm(CoarseBase.SKINNED), skinned=skinned[:4])

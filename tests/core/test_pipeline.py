@@ -54,7 +54,7 @@ def test_posed_patch_matches_the_whole_posed_body():
 
 def test_coarse_base_adds_the_displacement_to_the_body_or_the_skinned_garment():
     """A zero displacement gives I M_b (METHOD.md's base) or exactly the skinning tier."""
-    from cloth_usd.core.pipeline import CoarseBase, run_tiers
+    from cloth_usd.core.pipeline import CoarseBase, CoarseForm, run_tiers
     from cloth_usd.core.postprocess import push_out_of_surface
     from cloth_usd.core.skinning import skin_garment
 
@@ -70,18 +70,18 @@ def test_coarse_base_adds_the_displacement_to_the_body_or_the_skinned_garment():
     posed = pose_body(body, pair, poses, transl)
     for base, want in ((CoarseBase.BODY, posed.garment_points),
                        ("skinned", skin_garment(pair.binding, poses, transl, body.parents))):
-        got, moved = run_tiers(body, pair, poses, transl, zero, batch_size=2, coarse_base=base)
+        got, moved = run_tiers(body, pair, poses, transl, zero, batch_size=2, form=CoarseForm(base))
         expect, expect_moved = push_out_of_surface(want, posed.patch_points, posed.patch_normals, pair.patch.faces,
                                                    pair.patch.contact)
         np.testing.assert_allclose(got, expect, atol=1e-12)
         np.testing.assert_array_equal(moved, expect_moved)
         if base is CoarseBase.BODY:  # the body itself lies within the margin: every vertex is pushed
             assert (expect_moved == want.shape[1]).all()
-        raw, none = run_tiers(body, pair, poses, transl, zero, batch_size=2, coarse_base=base, postprocess=False)
+        raw, none = run_tiers(body, pair, poses, transl, zero, batch_size=2, form=CoarseForm(base), postprocess=False)
         np.testing.assert_allclose(raw, want, atol=1e-12)  # the models' garment as they made it
         assert not none.any()
     with pytest.raises(ValueError):
-        run_tiers(body, pair, poses, transl, zero, coarse_base="hips")
+        run_tiers(body, pair, poses, transl, zero, form=CoarseForm("hips"))
 
 
 def test_contact_features_let_a_model_see_and_undo_what_skinning_puts_into_the_body():
@@ -89,7 +89,7 @@ def test_contact_features_let_a_model_see_and_undo_what_skinning_puts_into_the_b
     model that pushes each vertex out along them leaves fewer vertices inside than skinning.
     With the trees built once, the post-process gives what it gives building its own."""
     from cloth_usd.core.features import contact_features
-    from cloth_usd.core.pipeline import CoarseFeatures, contact_trees, run_tiers
+    from cloth_usd.core.pipeline import CoarseFeatures, CoarseForm, contact_trees, run_tiers
     from cloth_usd.core.postprocess import push_out_of_surface
     from cloth_usd.core.skinning import skin_garment
     from cloth_usd.errors import ArgumentError
@@ -116,11 +116,11 @@ def test_contact_features_let_a_model_see_and_undo_what_skinning_puts_into_the_b
     def push(f, graph):  # out along the nearest body normal, to 5 mm in front of its plane
         return f[..., 7:10] * np.maximum(0.005 - f[..., 10:11], 0.0)
 
-    raw, _ = run_tiers(body, pair, poses, transl, push, coarse_base="skinned", coarse_features="contact",
+    raw, _ = run_tiers(body, pair, poses, transl, push, form=CoarseForm("skinned", features="contact"),
                        postprocess=False)
     after = contact_features(raw, posed.patch_points[:, cloud], posed.patch_normals[:, cloud])
     assert (after[..., 3] < 0).sum() < 0.5 * inside.sum()
-    got, moved = run_tiers(body, pair, poses, transl, push, coarse_base="skinned", coarse_features="contact")
+    got, moved = run_tiers(body, pair, poses, transl, push, form=CoarseForm("skinned", features="contact"))
     want, want_moved = push_out_of_surface(raw, posed.patch_points, posed.patch_normals, pair.patch.faces, cloud,
                                            rings=pair.patch.rings)
     np.testing.assert_array_equal(got, want)
@@ -166,3 +166,15 @@ def test_the_body_under_any_garment_includes_the_arms_hands_and_thighs():
     # every triangle around a searched vertex is in the patch, so its normal is the whole body's
     assert (pair.patch.rings[pair.patch.contact] >= 0).sum() == np.isin(
         body.faces, contact).sum()
+
+
+def test_coarse_form_reads_the_manifest_strings_and_refuses_others():
+    from cloth_usd.core.heading import Heading
+    from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures, CoarseForm
+
+    form = CoarseForm("skinned", "canonical", "contact")
+    assert form == CoarseForm(CoarseBase.SKINNED, Heading.CANONICAL, CoarseFeatures.CONTACT)
+    assert CoarseForm() == CoarseForm(CoarseBase.BODY, Heading.WORLD, CoarseFeatures.BODY)  # a bundle without the fields
+    for bad in ({"base": "hips"}, {"heading": "north"}, {"features": "colour"}):
+        with pytest.raises(ValueError):
+            CoarseForm(**bad)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -13,7 +15,8 @@ pytest.importorskip("onnxscript", reason="the torch.onnx exporter needs onnx and
 from meshes import grid, icosphere  # noqa: E402
 
 from cloth_usd.core.graph import build_graph  # noqa: E402
-from cloth_usd.nn.export import OPSET, export_coarse, export_detail  # noqa: E402
+import cloth_usd  # noqa: E402
+from cloth_usd.nn.export import OPSET, STACK_TRACE, export_coarse, export_detail  # noqa: E402
 from cloth_usd.nn.models import CoarseConfig, CoarseGenerator, DetailConfig, DetailGenerator  # noqa: E402
 from cloth_usd.runtime import (  # noqa: E402
     COARSE_INPUTS,
@@ -103,6 +106,25 @@ def test_exported_graphs_have_no_scatter_and_keep_the_guard(coarse, detail):
         assert "Clip" in ops or "Max" in ops  # the clamp_min of the direction normalisation
         assert m.opset_import[0].version >= OPSET
         assert [i.name for i in m.graph.input] == list(COARSE_INPUTS if path.stem == "coarse" else DETAIL_INPUTS)
+
+
+def test_exported_files_carry_no_source_paths(coarse, tmp_path):
+    model, path = coarse
+    data = path.read_bytes()
+    assert STACK_TRACE.encode() not in data
+    assert str(Path(cloth_usd.__file__).parent).encode() not in data
+    again = export_coarse(model, tmp_path / "again.onnx")
+    assert again.read_bytes() == data  # the same model, the same bytes
+
+
+def test_exported_attention_never_takes_an_underflowing_exp(coarse):
+    """Every Exp of the attention softmax reads a Max/Clip (the EXP_FLOOR floor)."""
+    m = onnx.load(str(coarse[1]))
+    producer = {o: n for n in m.graph.node for o in n.output}
+    exps = [n for n in m.graph.node if n.op_type == "Exp"]
+    assert exps
+    assert all(producer[n.input[0]].op_type in ("Max", "Clip") for n in exps), \
+        [producer[n.input[0]].op_type for n in exps]
 
 
 def _zero_layer(model: "onnx.ModelProto", bias_name: str) -> None:

@@ -89,7 +89,7 @@ def test_a_physics_run_loads_and_exports_a_bundle_that_bakes(config_path, tmp_pa
     assert run.config.objective is Objective.PHYSICS and run.info["data"]["kind"] == "physics"
     out = export_bundle(tmp_path / "run", None, config_path, tmp_path / "bundle", name="physics-test")
     bundle = load_bundle(out)
-    assert bundle.heading is Heading.CANONICAL and bundle.coarse_base is CoarseBase.SKINNED
+    assert bundle.form.heading is Heading.CANONICAL and bundle.form.base is CoarseBase.SKINNED
     assert bundle.manifest["metrics"]["export_parity"]["coarse_max_m"] < 1e-4
     with pytest.raises(ArgumentError, match="a run exists there"):
         train_physics(config_path, tmp_path / "run", PHYSICS, device="cpu")
@@ -113,7 +113,7 @@ def test_the_detail_tier_trains_on_the_coarse_run_and_ships_with_it(config_path,
     out = export_bundle(tmp_path / "coarse", tmp_path / "detail", config_path, tmp_path / "bundle", name="phys-pair")
     bundle = load_bundle(out)
     assert Tier.DETAIL in bundle.tiers and bundle.manifest["metrics"]["export_parity"]["detail_max_m"] < 1e-4
-    assert bundle.coarse_features is CoarseFeatures.CONTACT
+    assert bundle.form.features is CoarseFeatures.CONTACT
     assert bundle.manifest["models"]["coarse"]["features"] == "contact"
 
 

@@ -12,7 +12,7 @@ torch = pytest.importorskip("torch", reason="training needs torch (pip install '
 
 from train_data import TINY_TRAIN, one_thread, tiny_dataset, tiny_runs, tiny_trained_bundle  # noqa: E402,F401
 
-from cloth_usd.core.pipeline import run_tiers  # noqa: E402
+from cloth_usd.core.pipeline import CoarseForm, run_tiers  # noqa: E402
 from cloth_usd.core.scene import Tier  # noqa: E402
 from cloth_usd.errors import ArgumentError  # noqa: E402
 from cloth_usd.datagen.dataset import laplacian_smooth  # noqa: E402
@@ -197,11 +197,11 @@ def test_skinned_coarse_base_from_training_to_the_runtime(data, tmp_path):
     np.testing.assert_allclose(m_coarse, skinned + torch_coarse_fn(coarse.model)(ex.features, clip.pair.graph),
                                atol=1e-9)
     bundle = load_bundle(export_bundle(tmp_path / "c", tmp_path / "d", path, tmp_path / "b", name="skinned-base"))
-    assert bundle.coarse_base.value == "skinned"
+    assert bundle.form.base.value == "skinned"
     val = load_dataset(path, (Split.VAL,), max_frames=3).split(Split.VAL)[0]
     learned = LearnedGarment(bundle, ds.body, val.pair.betas, val.rest_points, val.pair.faces)
     want, _ = run_tiers(ds.body, val.pair, val.poses, val.transl, torch_coarse_fn(coarse.model),
-                        torch_detail_fn(load_run(tmp_path / "d").model), coarse_base="skinned")
+                        torch_detail_fn(load_run(tmp_path / "d").model), form=CoarseForm("skinned"))
     np.testing.assert_allclose(learned.evaluate("detail", val.poses, val.transl).points, want, atol=1e-4, rtol=0)
 
 

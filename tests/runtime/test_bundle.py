@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures
+from cloth_usd.core.heading import Heading
+from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures, CoarseForm
 from cloth_usd.core.scene import Category, Tier
 from cloth_usd.errors import ArgumentError, BundleError, ClothUsdError
 from cloth_usd.runtime import find_bundle, load_bundle
@@ -40,14 +41,14 @@ def test_round_trip(tmp_path, fake_exported):
     assert m["models"]["coarse"]["inputs"] == ["features", "nbr", "nbr_mask"]
     assert m["models"]["coarse"]["config"] == {"width": 0.125}
     assert m["training_data"]["description"] and m["metrics"] == {"note": "untrained"}
-    assert m["models"]["coarse"]["base"] == "body" and b.coarse_base is CoarseBase.BODY
+    assert m["models"]["coarse"]["base"] == "body" and b.form.base is CoarseBase.BODY
     del m["models"]["coarse"]["base"]  # a bundle from before the field: METHOD.md's base
     (folder / "manifest.json").write_text(json.dumps(m))
-    assert load_bundle(folder).coarse_base is CoarseBase.BODY
+    assert load_bundle(folder).form.base is CoarseBase.BODY
     assert m["models"]["coarse"]["features"] == "body"
     del m["models"]["coarse"]["features"]  # a bundle from before the field (tshirt-v1..v5): docs/method.md's features
     (folder / "manifest.json").write_text(json.dumps(m))
-    assert load_bundle(folder).coarse_features is CoarseFeatures.BODY
+    assert load_bundle(folder).form.features is CoarseFeatures.BODY
     coarse_only = load_bundle(write_tiny_bundle(tmp_path / "c", fake_exported, detail=False))
     assert coarse_only.tiers == (Tier.COARSE,)
     with pytest.raises(BundleError, match="no 'detail' model"):
@@ -60,9 +61,8 @@ def test_skinned_coarse_base_is_recorded(tmp_path, fake_exported):
     coarse, det, fit, configs = fake_exported
     folder = write_bundle(tmp_path / "s", name="s", category="tshirt", coarse_onnx=coarse, detail_onnx=det,
                           fit_npz=fit, configs=configs, training_data={}, metrics={}, opset=18,
-                          coarse_base="skinned", coarse_features="contact")
-    assert load_bundle(folder).coarse_base is CoarseBase.SKINNED
-    assert load_bundle(folder).coarse_features is CoarseFeatures.CONTACT
+                          form=CoarseForm("skinned", features="contact"))
+    assert load_bundle(folder).form == CoarseForm(CoarseBase.SKINNED, Heading.WORLD, CoarseFeatures.CONTACT)
     assert {"base", "features"}.isdisjoint(json.loads((folder / "manifest.json").read_text())["models"]["detail"])
 
 
@@ -150,7 +150,7 @@ def test_the_shipped_tshirt_bundle_verifies_and_records_its_evaluation():
 
     bundle = find_bundle("tshirt")
     assert bundle is not None and bundle.path.parent == default_bundle_dir() and bundle.name == "tshirt-v6"
-    assert bundle.heading.value == "canonical"
+    assert bundle.form.heading.value == "canonical"
     evaluation = json.loads((bundle.path / "manifest.json").read_text())["metrics"]["evaluation"]
     assert evaluation["same_models"] is True and evaluation["rows"]  # measured on these very ONNX files
     for row in evaluation["rows"]:  # against Newton on real motion: both learned tiers below skinning
