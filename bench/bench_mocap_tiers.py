@@ -16,6 +16,10 @@ detail tier. Per bake, over every frame of the clip:
   evaluated again here with ``LearnedGarment.evaluate(..., postprocess=False)``) and after it
   (the baked cache), on every fifth frame; and the post-process's count of the vertices it
   moved per frame;
+- where (learned tiers, before the post-process): of the vertices inside the body, the share
+  also inside in the skinning tier's garment of that frame, and the share nearest to each
+  body part (the body joint that skins the nearest body triangle's first corner most), so a
+  clip's penetration reads as "the arms against the chest" rather than a bare percentage;
 - bending: the dihedral bending energy of the material (``nn.physics``; needs torch) [J].
 
 Writes ``OUT/mocap_tiers.md`` (also printed) and ``OUT/mocap_tiers.json``.
@@ -35,8 +39,10 @@ from pathlib import Path
 import numpy as np
 from pxr import Sdf
 
+from cloth_usd.core.association import associate
 from cloth_usd.core.body import load_body_model, posed_vertices, shape_body
 from cloth_usd.core.frames import canonical_motion
+from cloth_usd.core.smpl import JOINT_NAMES
 from cloth_usd.datagen.simulate import body_side, unique_edges
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
 from cloth_usd.runtime.garment import LearnedGarment
@@ -140,7 +146,13 @@ def main(argv=None) -> int:
             vs_rest, vs_skin = _stretch(pts, rest, edges), _stretch(pts, skinned, edges)
             p99_rest, p99_skin = np.percentile(vs_rest, 99, axis=1), np.percentile(vs_skin, 99, axis=1)
             inside, deep = np.array([_inside(pts[t], bodies[t], body.faces) for t in sampled]).T
-            before = (inside, deep) if bundle is None else _before(learned[bundle], body, poses, tier, sampled, bodies)
+            where = {}
+            if bundle is None:
+                before = (inside, deep)
+            else:
+                raw = _before(learned[bundle], poses, tier, sampled)
+                before = tuple(np.array([_inside(raw[i], bodies[t], body.faces) for i, t in enumerate(sampled)]).T)
+                where = _where(raw, skinned[sampled], bodies[sampled], body)
             row = {"clip": label, "frames": len(times), "bundle": Path(bundle).name if bundle else "-", "tier": tier,
                    "fallback_coarse": int(report.get("fallback_coarse", 0)),
                    "fallback_skinning": int(report.get("fallback_skinning", 0)),
@@ -152,7 +164,8 @@ def main(argv=None) -> int:
                    "postprocess_moved_per_frame": float(report.get("postprocess_moved", 0)) / max(len(times), 1),
                    "inside_before": float(np.mean(before[0])), "inside_1mm_before": float(np.mean(before[1])),
                    "inside_after": float(np.mean(inside)), "inside_1mm_after": float(np.mean(deep)),
-                   "bending_j": float(np.mean([energy(p) for p in pts[::5]])) if energy else float("nan")}
+                   "bending_j": float(np.mean([energy(p) for p in pts[::5]])) if energy else float("nan"),
+                   **where}
             rows.append(row)
             print(json.dumps(row), flush=True)
     (out / "mocap_tiers.json").write_text(json.dumps(rows, indent=1))
@@ -168,6 +181,15 @@ def main(argv=None) -> int:
                      f"{r['postprocess_moved_per_frame']:.0f} | {100 * r['inside_before']:.2f}% "
                      f"({100 * r['inside_1mm_before']:.2f}%) | {100 * r['inside_after']:.2f}% ({100 * r['inside_1mm_after']:.2f}%) | "
                      f"{r['bending_j']:.2e} |")
+    learned_rows = [r for r in rows if "inside_before_near" in r]
+    if learned_rows:
+        lines += ["", "Where the garment is inside the body before the post-process (every fifth frame):", "",
+                  "| clip | bundle | tier | inside before | of them also inside in skinning | nearest body part |",
+                  "|---|---|---|---:|---:|---|"]
+        for r in learned_rows:
+            near = ", ".join(f"{k} {100 * v:.0f}%" for k, v in list(r["inside_before_near"].items())[:5])
+            lines.append(f"| {r['clip']} | {r['bundle']} | {r['tier']} | {100 * r['inside_before']:.2f}% | "
+                         f"{100 * r['inside_before_in_skinning']:.0f}% | {near} |")
     text = "\n".join(lines) + "\n"
     (out / "mocap_tiers.md").write_text(text)
     print(text)
@@ -188,12 +210,34 @@ def _stage_poses(shot: Path, times: np.ndarray, body) -> dict:
             "rest": canonical.rest_points(garment.rest_points), "faces": garment.triangles}
 
 
-def _before(learned: LearnedGarment, body, poses: dict, tier: str, sampled: np.ndarray, bodies: np.ndarray) -> tuple:
-    """The fractions inside the body and deeper than 1 mm (:func:`_inside`) of the ``tier``
-    garment of ``learned`` (the shot's garment on its bundle) before the post-process, at the
-    ``sampled`` frames: the models run again as the bake runs them, with the post-process left out."""
-    raw = learned.evaluate(tier, poses["model_poses"][sampled], poses["model_transl"][sampled], postprocess=False).points
-    return tuple(np.array([_inside(raw[i], bodies[t], body.faces) for i, t in enumerate(sampled)]).T)
+def _before(learned: LearnedGarment, poses: dict, tier: str, sampled: np.ndarray) -> np.ndarray:
+    """(S, N, 3) the ``tier`` garment of ``learned`` (the shot's garment on its bundle) before
+    the post-process, at the ``sampled`` frames: the models run again as the bake runs them,
+    with the post-process left out."""
+    return learned.evaluate(tier, poses["model_poses"][sampled], poses["model_transl"][sampled],
+                            postprocess=False).points
+
+
+def _where(raw: np.ndarray, skinned: np.ndarray, bodies: np.ndarray, body) -> dict:
+    """Of the vertices of ``raw`` (S, N, 3) inside ``bodies`` (S, V, 3): the share also inside
+    in ``skinned`` (S, N, 3), and the share nearest to each body part (the joint weighing most
+    on the nearest triangle's first corner), largest first; empty shares when none is inside."""
+    part = body.weights.argmax(axis=1)
+    total = also = 0
+    near = np.zeros(len(JOINT_NAMES), dtype=np.int64)
+    for points, skin, verts in zip(raw, skinned, bodies):
+        if not np.isfinite(points).all():
+            continue
+        inside = body_side(points, verts, body.faces) < 0.0
+        if not inside.any():
+            continue
+        total += int(inside.sum())
+        also += int((inside & (body_side(skin, verts, body.faces) < 0.0)).sum())
+        hit = associate(points[inside], verts, body.faces).triangle
+        near += np.bincount(part[body.faces[hit, 0]], minlength=len(JOINT_NAMES))
+    order = np.argsort(-near, kind="stable")
+    return {"inside_before_in_skinning": also / total if total else float("nan"),
+            "inside_before_near": {JOINT_NAMES[j]: float(near[j] / total) for j in order if near[j]}}
 
 
 def _bending(rest: np.ndarray, faces: np.ndarray):
