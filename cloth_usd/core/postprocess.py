@@ -24,7 +24,7 @@ from ..errors import ArgumentError
 from .association import closest_point_on_triangles, incident_faces
 
 __all__ = ["push_out", "push_out_of_surface", "nearest_vertex", "nearest_body_points", "search_tree", "garment_margin",
-           "DEFAULT_MARGIN", "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_REACH", "SURFACE_ROUNDS"]
+           "DEFAULT_MARGIN", "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_ROUNDS"]
 
 #: Default clearance from the body surface [m] (2 mm).
 DEFAULT_MARGIN = 0.002
@@ -128,10 +128,6 @@ SURFACE_CANDIDATES = 4
 #: Times :func:`push_out_of_surface` measures a vertex it moved against the surface again:
 #: where an arm overlaps the torso, a vertex pushed out of one can land in the other.
 SURFACE_ROUNDS = 3
-#: :func:`push_out_of_surface` looks for a garment vertex's nearest body vertices within this
-#: distance [m], and for its nearest one alone out to ``reach``: a vertex with no body vertex
-#: this close lies in open space or deep in the body, where the nearest vertex's plane holds.
-SURFACE_REACH = 0.02
 
 
 def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normals: np.ndarray,
@@ -141,10 +137,11 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
                         trees: list | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The post-process: push garment vertices out of the body's surface, to ``margin`` in front of it.
 
-    Per frame, each garment vertex's ``neighbours`` nearest candidate body vertices are found
-    (within :data:`SURFACE_REACH`; the nearest alone out to ``reach``). The vertex is pushed in front of the nearest one's tangent plane
+    Per frame, each garment vertex's ``neighbours`` nearest candidate body vertices within
+    ``reach`` are found. The vertex is pushed in front of the nearest one's tangent plane
     (:func:`push_out`); where it then still lies behind the tangent plane of another of them
-    (an arm against the torso, an armpit: places where a plane is not the surface), the
+    (an arm against the torso, an armpit, a thigh raised into the belly: places where a plane
+    is not the surface; the belly's vertices can be the nearer, the thigh's 2 cm off), the
     closest point of the triangles around those vertices is found and the vertex pushed out
     along the normal interpolated there, to ``margin`` in front of the surface, and measured
     again, up to ``rounds`` times.
@@ -158,7 +155,8 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
         candidates: (K,) int the vertices of ``body_points`` searched (the body under the
             garment), K > 0.
         margin: clearance [m] to keep in front of the body.
-        reach: a vertex further than this [m] from every candidate is left alone.
+        reach: a vertex further than this [m] from every candidate is left alone, and its
+            nearest candidates are looked for this far.
         neighbours: candidate vertices tested per garment vertex.
         rounds: surface tests of a vertex, at most (one the test moved is tested again).
         rings: (V', D) int the rows of ``body_faces`` around each body vertex, padded with -1
@@ -189,10 +187,7 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
         r = np.flatnonzero(np.isfinite(p[t]).all(axis=1))  # a non-finite vertex stays so (the guard catches it)
         if r.size:
             tree = trees[t] if trees is not None else search_tree(b[t, cand])
-            index = tree.query(p[t, r], k=k, distance_upper_bound=min(reach, SURFACE_REACH))[1].reshape(r.size, k)
-            far = np.flatnonzero(index[:, 0] == cand.size)
-            if far.size and reach > SURFACE_REACH:  # the nearest alone, further out (a quarter of the search's cost)
-                index[far, 0] = tree.query(p[t, r[far]], k=1, distance_upper_bound=reach)[1]
+            index = tree.query(p[t, r], k=k, distance_upper_bound=reach)[1].reshape(r.size, k)
             keep = index[:, 0] < cand.size  # near the body at all
             frames.append(np.full(np.count_nonzero(keep), t))
             rows.append(r[keep])

@@ -158,3 +158,36 @@ def test_the_surface_push_leaves_far_and_non_finite_vertices_and_checks_its_argu
         push_out_of_surface(garment, pts[None], normals[None], faces, only_floor[:0])
     with pytest.raises(ArgumentError, match="margin"):
         push_out_of_surface(garment, pts[None], normals[None], faces, only_floor, margin=-0.001)
+
+
+def _sheet(xs, ys, z):
+    """A triangulated sheet over ``xs`` x ``ys`` at height ``z``, the body below it (normals
+    +z). Returns ``(points (V, 3), faces (M, 3), normals (V, 3))``."""
+    pts = np.array([[x, y, z] for y in ys for x in xs])
+    m = len(xs)
+    faces = np.array([f for j in range(len(ys) - 1) for i in range(m - 1)
+                      for f in ((j * m + i, j * m + i + 1, (j + 1) * m + i),
+                                (j * m + i + 1, (j + 1) * m + i + 1, (j + 1) * m + i))])
+    return pts, faces, np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+
+
+def _two_parts(first, second):
+    """Two sheets as one body: their points, faces and normals stacked."""
+    return (np.concatenate([first[0], second[0]]), np.concatenate([first[1], second[1] + len(first[0])]),
+            np.concatenate([first[2], second[2]]))
+
+
+def test_a_vertex_inside_a_part_whose_vertices_lie_past_another_parts_is_pushed_out_of_it():
+    from cloth_usd.core.postprocess import push_out_of_surface
+
+    # a thigh raised into a shirt's hem, coarsely: the vertex is 15 mm inside a part (z < 0)
+    # whose vertices are 3 cm and more away, and 18 mm in front of a small part whose vertex
+    # is its nearest (28 mm off; the search for more neighbours used to stop at 2 cm)
+    body = _two_parts(_sheet(np.arange(-0.08, 0.081, 0.04), np.arange(-0.08, 0.081, 0.04), 0.0),
+                      _sheet([-0.005, 0.005], [-0.005, 0.005], -0.033))
+    garment = np.array([[[0.02, 0.02, -0.015]]])
+    out, moved = push_out_of_surface(garment, body[0][None], body[2][None], body[1], np.arange(len(body[0])),
+                                     margin=0.002)
+    np.testing.assert_allclose(out[0, 0], [0.02, 0.02, 0.002], atol=1e-9)
+    assert moved.tolist() == [1]
+
