@@ -79,13 +79,18 @@ def _stretch(points: np.ndarray, ref: np.ndarray, edges: np.ndarray) -> np.ndarr
     return length / np.maximum(ref_len, 1e-4)
 
 
-def _inside(points: np.ndarray, body_points: np.ndarray, body_faces: np.ndarray) -> tuple[float, float]:
-    """The fractions of ``points`` inside the body and deeper than 1 mm in it
-    (``penetration_fraction``'s measure, the body searched once); NaN for a non-finite frame."""
-    if not np.isfinite(points).all():
-        return float("nan"), float("nan")
-    side = body_side(points, body_points, body_faces)
-    return float(np.mean(side < 0.0)), float(np.mean(side < -1e-3))
+def _side(points: np.ndarray, body_points: np.ndarray, body_faces: np.ndarray) -> np.ndarray | None:
+    """(N,) each of ``points``' signed distance to the body [m], negative inside
+    (``penetration_fraction``'s measure); None for a non-finite frame."""
+    return body_side(points, body_points, body_faces) if np.isfinite(points).all() else None
+
+
+def _inside(sides: list) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame of :func:`_side` arrays, the fractions of the vertices inside the body and
+    deeper than 1 mm in it (NaN for a non-finite frame)."""
+    rows = [(np.nan, np.nan) if side is None else (np.mean(side < 0.0), np.mean(side < -1e-3)) for side in sides]
+    inside, deep = np.array(rows, dtype=np.float64).reshape(-1, 2).T
+    return inside, deep
 
 
 def _garment_report(provenance: dict) -> dict:
@@ -145,14 +150,16 @@ def main(argv=None) -> int:
             report = _garment_report(prov)
             vs_rest, vs_skin = _stretch(pts, rest, edges), _stretch(pts, skinned, edges)
             p99_rest, p99_skin = np.percentile(vs_rest, 99, axis=1), np.percentile(vs_skin, 99, axis=1)
-            inside, deep = np.array([_inside(pts[t], bodies[t], body.faces) for t in sampled]).T
+            sides = [_side(pts[t], bodies[t], body.faces) for t in sampled]
+            inside, deep = _inside(sides)
             where = {}
-            if bundle is None:
-                before = (inside, deep)
+            if bundle is None:  # the skinning tier, first: its sides serve the learned tiers' "where" too
+                before, skin_sides = (inside, deep), sides
             else:
                 raw = _before(learned[bundle], poses, tier, sampled)
-                before = tuple(np.array([_inside(raw[i], bodies[t], body.faces) for i, t in enumerate(sampled)]).T)
-                where = _where(raw, skinned[sampled], bodies[sampled], body)
+                raw_sides = [_side(raw[i], bodies[t], body.faces) for i, t in enumerate(sampled)]
+                before = _inside(raw_sides)
+                where = _where(raw, raw_sides, skin_sides, bodies[sampled], body)
             row = {"clip": label, "frames": len(times), "bundle": Path(bundle).name if bundle else "-", "tier": tier,
                    "fallback_coarse": int(report.get("fallback_coarse", 0)),
                    "fallback_skinning": int(report.get("fallback_skinning", 0)),
@@ -218,21 +225,22 @@ def _before(learned: LearnedGarment, poses: dict, tier: str, sampled: np.ndarray
                             postprocess=False).points
 
 
-def _where(raw: np.ndarray, skinned: np.ndarray, bodies: np.ndarray, body) -> dict:
-    """Of the vertices of ``raw`` (S, N, 3) inside ``bodies`` (S, V, 3): the share also inside
-    in ``skinned`` (S, N, 3), and the share nearest to each body part (the joint weighing most
-    on the nearest triangle's first corner), largest first; empty shares when none is inside."""
+def _where(raw: np.ndarray, raw_sides: list, skin_sides: list, bodies: np.ndarray, body) -> dict:
+    """Of the vertices of ``raw`` (S, N, 3) inside ``bodies`` (S, V, 3) (``raw_sides``, their
+    :func:`_side` arrays): the share also inside in the skinning tier's garment of those frames
+    (``skin_sides``), and the share nearest to each body part (the joint weighing most on the
+    nearest triangle's first corner), largest first; empty shares when none is inside."""
     part = body.weights.argmax(axis=1)
     total = also = 0
     near = np.zeros(len(JOINT_NAMES), dtype=np.int64)
-    for points, skin, verts in zip(raw, skinned, bodies):
-        if not np.isfinite(points).all():
+    for points, side, skin, verts in zip(raw, raw_sides, skin_sides, bodies):
+        if side is None:
             continue
-        inside = body_side(points, verts, body.faces) < 0.0
+        inside = side < 0.0
         if not inside.any():
             continue
         total += int(inside.sum())
-        also += int((inside & (body_side(skin, verts, body.faces) < 0.0)).sum())
+        also += int((inside & (skin < 0.0)).sum()) if skin is not None else 0
         hit = associate(points[inside], verts, body.faces).triangle
         near += np.bincount(part[body.faces[hit, 0]], minlength=len(JOINT_NAMES))
     order = np.argsort(-near, kind="stable")
