@@ -228,8 +228,9 @@ def _before(learned: LearnedGarment, poses: dict, tier: str, sampled: np.ndarray
 def _where(raw: np.ndarray, raw_sides: list, skin_sides: list, bodies: np.ndarray, body) -> dict:
     """Of the vertices of ``raw`` (S, N, 3) inside ``bodies`` (S, V, 3) (``raw_sides``, their
     :func:`_side` arrays): the share also inside in the skinning tier's garment of those frames
-    (``skin_sides``), and the share nearest to each body part (the joint weighing most on the
-    nearest triangle's first corner), largest first; empty shares when none is inside."""
+    (``skin_sides``; a frame whose skinned garment is not finite counts none), and the share
+    nearest to each body part (the joint weighing most on the nearest triangle's first
+    corner), largest first; empty shares when none is inside."""
     part = body.weights.argmax(axis=1)
     total = also = 0
     near = np.zeros(len(JOINT_NAMES), dtype=np.int64)
