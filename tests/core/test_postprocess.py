@@ -9,6 +9,15 @@ from cloth_usd.core.postprocess import push_out
 from cloth_usd.errors import ArgumentError
 
 
+def _grid_faces(columns: int, rows: int) -> np.ndarray:
+    """(M, 3) the triangles of a grid of ``rows`` x ``columns`` vertices numbered row by row,
+    two per cell."""
+    m = columns
+    return np.array([f for j in range(rows - 1) for i in range(m - 1)
+                     for f in ((j * m + i, j * m + i + 1, (j + 1) * m + i),
+                               (j * m + i + 1, (j + 1) * m + i + 1, (j + 1) * m + i))])
+
+
 def test_pushes_exactly_the_penetrating_vertices():
     # Body plane z = 0 with normal +z at every associated vertex; garment heights per frame.
     heights = np.array([[0.010, 0.002, 0.001, -0.005, 0.0],
@@ -74,10 +83,7 @@ def test_a_coarse_garment_keeps_more_clearance_than_a_fine_one():
 
     def grid(spacing):
         xs = np.arange(6) * spacing
-        pts = np.array([[x, y, 0.0] for y in xs for x in xs])
-        faces = np.array([f for j in range(5) for i in range(5)
-                          for f in ((6 * j + i, 6 * j + i + 1, 6 * j + i + 6), (6 * j + i + 1, 6 * j + i + 7, 6 * j + i + 6))])
-        return pts, faces
+        return np.array([[x, y, 0.0] for y in xs for x in xs]), _grid_faces(6, 6)
 
     assert garment_margin(*grid(0.015)) == DEFAULT_MARGIN  # a 4000-vertex shirt's edges: the sagitta is 0.6 mm
     coarse = garment_margin(*grid(0.04))
@@ -109,10 +115,7 @@ def _corner():
     path = [(-0.03, 0.0), (-0.02, 0.0), (-0.01, 0.0), (0.0, 0.0), (0.0, 0.01), (0.0, 0.02), (0.0, 0.03)]  # (x, z)
     ys = (-0.01, 0.0, 0.01)
     pts = np.array([[x, y, z] for y in ys for x, z in path])
-    m = len(path)
-    faces = np.array([f for j in range(len(ys) - 1) for i in range(m - 1)
-                      for f in ((j * m + i, j * m + i + 1, (j + 1) * m + i),
-                                (j * m + i + 1, (j + 1) * m + i + 1, (j + 1) * m + i))])
+    faces = _grid_faces(len(path), len(ys))
     return pts, faces, vertex_normals(pts, faces)
 
 
@@ -164,11 +167,7 @@ def _sheet(xs, ys, z):
     """A triangulated sheet over ``xs`` x ``ys`` at height ``z``, the body below it (normals
     +z). Returns ``(points (V, 3), faces (M, 3), normals (V, 3))``."""
     pts = np.array([[x, y, z] for y in ys for x in xs])
-    m = len(xs)
-    faces = np.array([f for j in range(len(ys) - 1) for i in range(m - 1)
-                      for f in ((j * m + i, j * m + i + 1, (j + 1) * m + i),
-                                (j * m + i + 1, (j + 1) * m + i + 1, (j + 1) * m + i))])
-    return pts, faces, np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    return pts, _grid_faces(len(xs), len(ys)), np.tile([0.0, 0.0, 1.0], (len(pts), 1))
 
 
 def _two_parts(first, second):
@@ -190,4 +189,3 @@ def test_a_vertex_inside_a_part_whose_vertices_lie_past_another_parts_is_pushed_
                                      margin=0.002)
     np.testing.assert_allclose(out[0, 0], [0.02, 0.02, 0.002], atol=1e-9)
     assert moved.tolist() == [1]
-
