@@ -210,14 +210,15 @@ def body_under(v_shaped: np.ndarray, rest_points: np.ndarray, reach: float = CON
 
 
 #: The joints whose vertices always count as the body under a garment (:func:`swinging_parts`):
-#: the arms and thighs swing against a garment in poses neither of :func:`body_under`'s
-#: reaches (the hands before the belly in a run, a thigh up into a shirt's hem in a kick).
-SWINGING_JOINTS = ("left_hip", "right_hip", "left_shoulder", "right_shoulder", "left_elbow", "right_elbow",
-                   "left_wrist", "right_wrist", "left_hand", "right_hand")
+#: the arms and legs swing against a garment in poses neither of :func:`body_under`'s
+#: reaches (the hands before the belly in a run, a thigh up into a shirt's hem in a kick, the
+#: knee and shin after it when the kick is high).
+SWINGING_JOINTS = ("left_hip", "right_hip", "left_knee", "right_knee", "left_shoulder", "right_shoulder",
+                   "left_elbow", "right_elbow", "left_wrist", "right_wrist", "left_hand", "right_hand")
 
 
 def swinging_parts(body: BodyModel) -> np.ndarray:
-    """(R,) int64 the body vertices skinned mostly to :data:`SWINGING_JOINTS` (the arms, hands and thighs)."""
+    """(R,) int64 the body vertices skinned mostly to :data:`SWINGING_JOINTS` (the arms, hands, thighs and shins)."""
     joints = [JOINT_NAMES.index(name) for name in SWINGING_JOINTS]
     return np.flatnonzero(np.isin(np.argmax(body.weights, axis=1), joints)).astype(np.int64)
 

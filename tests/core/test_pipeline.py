@@ -149,9 +149,10 @@ def test_the_body_under_a_shirt_includes_the_inner_arms_that_hang_against_it():
     assert upper_arm[lowered].sum() > 0.1 * upper_arm.sum()
 
 
-def test_the_body_under_any_garment_includes_the_arms_hands_and_thighs():
-    """A hand swung before the belly (a run) meets a shirt where neither the T-pose nor the
-    lowered arms put it: the post-process searches the arms, hands and thighs for every garment."""
+def test_the_body_under_any_garment_includes_the_arms_hands_and_legs():
+    """A hand swung before the belly (a run), a knee kicked up into the hem, meet a shirt where
+    neither the T-pose nor the lowered arms put them: the post-process searches the arms,
+    hands, thighs and shins for every garment."""
     from cloth_usd.core.pipeline import SWINGING_JOINTS, swinging_parts
     from cloth_usd.core.smpl import JOINT_NAMES
 
@@ -160,8 +161,9 @@ def test_the_body_under_any_garment_includes_the_arms_hands_and_thighs():
     pair = prepare_pair(body, np.zeros(10), rest, faces, find_bundle("tshirt").fit)
     owner = np.argmax(body.weights, axis=1)
     hands = np.flatnonzero(np.isin(owner, [JOINT_NAMES.index("left_hand"), JOINT_NAMES.index("right_hand")]))
+    shins = np.flatnonzero(np.isin(owner, [JOINT_NAMES.index("left_knee"), JOINT_NAMES.index("right_knee")]))
     contact = pair.patch.vertices[pair.patch.contact]
-    assert set(hands) <= set(swinging_parts(body)) <= set(contact)
+    assert set(hands) | set(shins) <= set(swinging_parts(body)) <= set(contact)
     assert {JOINT_NAMES[j] for j in owner[swinging_parts(body)]} == set(SWINGING_JOINTS)
     # every triangle around a searched vertex is in the patch, so its normal is the whole body's
     assert (pair.patch.rings[pair.patch.contact] >= 0).sum() == np.isin(
