@@ -20,7 +20,7 @@ from cloth_usd.baking import bake
 from cloth_usd.core.guard import GuardLimits
 from cloth_usd.errors import GarmentError
 from cloth_usd.core.body import load_body_model, shape_body
-from cloth_usd.core.limits import JOINT_LIMITS, pose_outliers
+from cloth_usd.core.limits import JOINT_LIMITS, pose_outliers, pose_range, pose_range_record
 from cloth_usd.datagen import walk_cycle
 from cloth_usd.datagen.motion import JOINT_LIMITS as DATAGEN_LIMITS
 from cloth_usd.datagen.motion import euler_to_poses
@@ -81,9 +81,10 @@ def read_points(cache: Path, prim: str = PRIM) -> np.ndarray:
     return np.stack([np.array(layer.QueryTimeSample(attr, t)) for t in layer.ListTimeSamplesForPath(attr)])
 
 
-def fake_bundle(folder: Path, scale: float) -> Path:
+def fake_bundle(folder: Path, scale: float, poses: np.ndarray | None = None) -> Path:
     """A coarse-tier bundle whose "model" moves each vertex by ``scale`` [m] along the body
-    normal (an ONNX graph made by hand: Slice(features, 0:3) * scale)."""
+    normal (an ONNX graph made by hand: Slice(features, 0:3) * scale); with ``poses`` (T, 72)
+    it records their range as the poses it was trained on, else none."""
     onnx = pytest.importorskip("onnx", reason="building a test bundle needs onnx")
     pytest.importorskip("onnxruntime", reason="the learned tiers need onnxruntime")
     from onnx import TensorProto, helper, numpy_helper
@@ -107,7 +108,8 @@ def fake_bundle(folder: Path, scale: float) -> Path:
              loadings=rng.normal(0, 0.01, (6, 3)), noise_variance=np.ones(6)).save(folder / "fit_src.npz")
     return write_bundle(folder / "bundle", name=f"fake-{scale}", category="tshirt",
                         coarse_onnx=folder / "coarse_src.onnx", detail_onnx=None, fit_npz=folder / "fit_src.npz",
-                        configs={}, training_data={"manifest_sha256": "0" * 64, "description": "tests only"},
+                        configs={}, training_data={"manifest_sha256": "0" * 64, "description": "tests only",
+                                                   **({} if poses is None else {"poses": pose_range_record(poses)})},
                         metrics={}, opset=18)
 
 
@@ -125,7 +127,7 @@ def test_limits_match_the_data_factory():
     assert pose_outliers(walk_cycle(96)[0]) is None
 
 
-def test_poses_at_pi_and_past_the_limits_bake_finite_bounded_and_warn(posed_stage, body, tmp_path, caplog):
+def test_poses_at_pi_and_past_the_limits_bake_finite_and_bounded(posed_stage, body, tmp_path, caplog):
     with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
         result = bake(posed_stage, tmp_path / "c.usdc")
     pts = read_points(tmp_path / "c.usdc")
@@ -136,21 +138,43 @@ def test_poses_at_pi_and_past_the_limits_bake_finite_bounded_and_warn(posed_stag
     assert np.linalg.norm(pts - joints[0], axis=-1).max() < 0.6
     g = result.garments[0]
     assert 0.0 < g.max_displacement_mm < 1000.0
-    (message,) = _warnings(caplog)
-    assert f"<{PRIM}>" in message and "outside the trained joint limits at frame 2 " in message
-    assert "and at 4 other of 7 frames" in message  # frame 5 (at the limits) is inside
-    assert g.warnings == (message,)
+    # skinning follows any pose and was trained on none: nothing to warn about the poses
+    assert _warnings(caplog) == [] and g.warnings == ()
 
 
-def test_learned_tier_at_extreme_poses_stays_finite_and_bounded(posed_stage, tmp_path, caplog):
-    bundle = fake_bundle(tmp_path / "plausible", 0.005)
+def test_learned_tier_at_extreme_poses_stays_finite_bounded_and_warns(posed_stage, tmp_path, caplog):
+    bundle = fake_bundle(tmp_path / "plausible", 0.005)  # records no training poses: JOINT_LIMITS stand in
     with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
         result = bake(posed_stage, tmp_path / "c.usdc", tier="coarse", models=bundle)
     pts = read_points(tmp_path / "c.usdc")
     assert np.isfinite(pts).all()
     g = result.garments[0]
     assert g.bundle == "fake-0.005" and 0.0 < g.max_offset_mm < 150.0
-    assert [m for m in _warnings(caplog) if "joint limits at frame 2" in m and PRIM in m]
+    (message,) = [m for m in _warnings(caplog) if "posed outside" in m]
+    assert f"<{PRIM}>" in message and "outside the trained joint limits at frame 2 " in message
+    assert "and at 4 other of 7 frames" in message  # frame 5 (at the limits) is inside
+    assert message in g.warnings
+
+
+def test_a_bundle_that_records_its_training_poses_is_checked_against_them(posed_stage, tmp_path, caplog):
+    """Real motion capture leaves JOINT_LIMITS in most frames (the CMU clips at the elbows,
+    hands and ankles): a bundle trained on it warns against the angles it saw, not those."""
+    extremes = extreme_poses()
+    # trained on these very poses (and their negatives: a turn by pi reads back from USD as one by -pi)
+    seen = fake_bundle(tmp_path / "seen", 0.005, poses=np.concatenate([extremes, -extremes]))
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
+        result = bake(posed_stage, tmp_path / "c.usdc", tier="coarse", models=seen)
+    assert not [m for m in _warnings(caplog) if "posed outside" in m]
+    assert not [m for m in result.garments[0].warnings if "posed outside" in m]
+    caplog.clear()
+    walked = fake_bundle(tmp_path / "walked", 0.005, poses=walk_cycle(96)[0])  # trained on a walk only
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
+        result = bake(posed_stage, tmp_path / "w.usdc", tier="coarse", models=walked)
+    expected = pose_outliers(extremes, limits=pose_range(walk_cycle(96)[0]))
+    (message,) = [m for m in _warnings(caplog) if "posed outside" in m]
+    assert (f"<{PRIM}>: body </Char/Skel> is posed outside the joint angles bundle 'fake-0.005' was trained on at "
+            f"frame {expected.frames[0] + 1} ({expected.joint} ") in message
+    assert f"and at {expected.frames.size - 1} other of 7 frames" in message and message in result.garments[0].warnings
 
 
 @pytest.mark.parametrize("scale, why", [(5.0, "a vertex 5.0"), (float("nan"), "not finite")])

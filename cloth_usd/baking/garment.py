@@ -34,11 +34,19 @@ FAR_FROM_BODY = 0.10
 LEARNED_BATCH_VERTICES = 16_000
 
 
-def range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray) -> list[str]:
+def range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray,
+                bundle: ModelBundle | None = None) -> list[str]:
     """What in a character's shape and motion lies outside the trained range, one line each.
+
+    The shape is checked against the training bodies' ``|beta| <= BETA_LIMIT``. The poses are
+    checked for a learned tier only (``bundle``; skinning follows any pose and was trained on
+    none): against the joint angles the bundle was trained on
+    (:attr:`~cloth_usd.runtime.bundle.ModelBundle.pose_limits`), or, for a bundle that records
+    none, :data:`~cloth_usd.core.limits.JOINT_LIMITS`, which its procedural motions kept.
 
     Args:
         times: (T,) the time codes of ``motion``.
+        bundle: the learned tier's bundle; None for the skinning tier.
     """
     notes = []
     outside = betas_outside(char.betas)
@@ -46,10 +54,12 @@ def range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray) -> 
         listed = ", ".join(f"beta[{i}] = {char.betas[i]:g}" for i in outside)
         notes.append(f"body <{char.prim_path}> has {listed}, outside the trained range "
                      f"|beta| <= {BETA_LIMIT:g}, at every frame")
-    poses = pose_outliers(motion.poses)
+    poses = None if bundle is None else pose_outliers(motion.poses, limits=bundle.pose_limits)
     if poses is not None:
         first = times[poses.frames[0]]
-        notes.append(f"body <{char.prim_path}> is posed outside the trained joint limits at frame "
+        trained = "the trained joint limits" if bundle.pose_limits is None else \
+            f"the joint angles bundle '{bundle.name}' was trained on"
+        notes.append(f"body <{char.prim_path}> is posed outside {trained} at frame "
                      f"{first:g} ({poses.joint} {poses.angle_deg:.0f} deg about {poses.axis}, trained "
                      f"{poses.low_deg:.0f}..{poses.high_deg:.0f}) and at {poses.frames.size - 1} other "
                      f"of {times.shape[0]} frames")

@@ -180,7 +180,8 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
             remove_stale_temps(target)
 
     characters = plan.characters()
-    motions: dict[str, tuple[CanonicalMotion, list[str]]] = {}
+    motions: dict[str, CanonicalMotion] = {}
+    notes: dict[tuple[str, str], list[str]] = {}
     reports = []
     with CacheLayerWriter(output, stage=scene.stage, start=times[0], end=times[-1],
                           force=force, protected=protected) as writer:
@@ -188,14 +189,17 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
             char: Character = characters[garment.body_path]
             body = plan.bodies[char.gender]
             if char.prim_path not in motions:  # once per character, whatever it wears
-                motion = canonical_motion(char, read_motion(stage, char, times), shape_body(body, char.betas)[1])
-                motions[char.prim_path] = motion, range_notes(char, motion, times)
-            motion, notes = motions[char.prim_path]
+                motions[char.prim_path] = canonical_motion(char, read_motion(stage, char, times),
+                                                           shape_body(body, char.betas)[1])
+            motion = motions[char.prim_path]
             choice = plan.tiers[garment.prim_path]
+            key = (char.prim_path, choice.bundle.sha256 if choice.bundle is not None else "")
+            if key not in notes:  # once per character and bundle: the poses against what it was trained on
+                notes[key] = range_notes(char, motion, times, choice.bundle)
             to_prim = garment_from_internal(stage, garment.prim_path, times)  # (T, 4, 4)
             reports.append(bake_garment(writer, garment, char, body, motion, times, choice.tier, to_prim,
                                         chunk=chunk, progress=progress, bundle=choice.bundle,
-                                        batch_size=batch_size, cache=cache, notes=notes,
+                                        batch_size=batch_size, cache=cache, notes=notes[key],
                                         source=scene.stage.identifier, on_progress=on_progress,
                                         strict=strict, guard=guard))
         # Both layers are saved under temporary names before either is renamed: a full disk or

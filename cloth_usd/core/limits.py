@@ -1,12 +1,17 @@
 """The range of bodies and poses cloth_usd's models were trained on, and checks against it.
 
-Training motions (``cloth_usd.datagen``) keep every joint inside :data:`JOINT_LIMITS`
-and training bodies keep ``|beta| <= BETA_LIMIT``. Inputs outside still bake, but the
-result is an extrapolation, so the bake warns. Shape letters: T frames, J joints (24).
+Procedural training motions (``cloth_usd.datagen``) keep every joint inside
+:data:`JOINT_LIMITS` and training bodies keep ``|beta| <= BETA_LIMIT``. Real motion capture
+leaves :data:`JOINT_LIMITS` (most frames of CMU clips do, at the elbows, hands and ankles),
+so a bundle trained on it records the range its training poses span (:func:`pose_range`,
+:func:`pose_range_record`) and a bake checks a learned tier against that. Inputs outside
+still bake, but the result is an extrapolation, so the bake warns. Shape letters: T frames,
+J joints (24).
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -15,7 +20,7 @@ from scipy.spatial.transform import Rotation
 from .smpl import JOINT_NAMES, NUM_JOINTS
 
 __all__ = ["BETA_LIMIT", "BETA_MAX", "EULER_ORDERS", "JOINT_LIMITS", "PoseOutlier", "betas_outside", "pose_outliers",
-           "poses_to_euler"]
+           "pose_range", "pose_range_from_record", "pose_range_record", "poses_to_euler"]
 
 #: Largest ``|beta|`` of the bodies the models were trained on (SMPL's shape space is
 #: a PCA in standard deviations; beyond 3 the bodies are implausible).
@@ -84,7 +89,9 @@ def poses_to_euler(poses: np.ndarray) -> np.ndarray:
     out = np.empty_like(rot)
     for order in sorted(set(EULER_ORDERS)):
         joints = [j for j, o in enumerate(EULER_ORDERS) if o == order]
-        angles = Rotation.from_rotvec(rot[:, joints].reshape(-1, 3)).as_euler(order)
+        with warnings.catch_warnings():  # at +-90 deg about the middle axis the third angle reads 0: fine here
+            warnings.filterwarnings("ignore", message="Gimbal lock detected", category=UserWarning)
+            angles = Rotation.from_rotvec(rot[:, joints].reshape(-1, 3)).as_euler(order)
         by_axis = np.argsort(["XYZ".index(a) for a in order])
         out[:, joints] = angles.reshape(len(poses), len(joints), 3)[..., by_axis]
     return out
@@ -119,16 +126,19 @@ class PoseOutlier:
     """High end [deg]."""
 
 
-def pose_outliers(poses: np.ndarray, margin_deg: float = 10.0) -> PoseOutlier | None:
+def pose_outliers(poses: np.ndarray, margin_deg: float = 10.0, limits: np.ndarray | None = None
+                  ) -> PoseOutlier | None:
     """The frames where some joint (not the root) is more than ``margin_deg`` outside its limits.
 
     Args:
         poses: (T, 72) axis-angle [rad], SMPL's (root first).
+        limits: (J, 3, 2) [rad] the range to check against (:func:`pose_range`, or
+            :func:`pose_range_from_record` of a bundle's); :data:`JOINT_LIMITS` when None.
     Returns:
         None when every frame is inside.
     """
     euler = poses_to_euler(poses)[:, 1:]  # (T, 23, 3); the root turns freely
-    lim = JOINT_LIMITS[1:]
+    lim = (JOINT_LIMITS if limits is None else np.asarray(limits, dtype=np.float64))[1:]
     excess = np.maximum(euler - lim[..., 1], lim[..., 0] - euler)  # (T, 23, 3) [rad], > 0 outside
     outside = excess > np.deg2rad(margin_deg)
     frames = np.flatnonzero(outside.any(axis=(1, 2)))
@@ -140,3 +150,50 @@ def pose_outliers(poses: np.ndarray, margin_deg: float = 10.0) -> PoseOutlier | 
     return PoseOutlier(frames=frames.astype(np.int64), joint=JOINT_NAMES[joint + 1], axis="xyz"[axis],
                        angle_deg=float(np.rad2deg(euler[first, joint, axis])), low_deg=float(low),
                        high_deg=float(high))
+
+
+def pose_range(poses: np.ndarray) -> np.ndarray:
+    """The range the poses span: per joint and Euler angle (:func:`poses_to_euler`), the
+    smallest and largest over the frames.
+
+    Args:
+        poses: (T, 72) axis-angle [rad], T > 0.
+    Returns:
+        (J, 3, 2) float64 [rad], ``[..., 0]`` low, ``[..., 1]`` high.
+    """
+    poses = np.asarray(poses, dtype=np.float64)
+    if poses.ndim != 2 or poses.shape[1] != 3 * NUM_JOINTS or poses.shape[0] == 0:
+        raise ValueError(f"poses must be (T, {3 * NUM_JOINTS}) with T > 0, got {poses.shape}")
+    euler = poses_to_euler(poses)
+    return np.stack([euler.min(axis=0), euler.max(axis=0)], axis=-1)
+
+
+def pose_range_record(poses: np.ndarray) -> dict:
+    """The range of :func:`pose_range` as a bundle manifest records it (JSON): ``{"frames": T,
+    "euler_deg": {joint name: [[low, high] about x, y, z]}}``, degrees rounded to 0.01."""
+    lim = np.rad2deg(pose_range(poses))
+    return {"frames": int(len(poses)),
+            "euler_deg": {name: [[round(float(lo), 2), round(float(hi), 2)] for lo, hi in lim[j]]
+                          for j, name in enumerate(JOINT_NAMES)}}
+
+
+def pose_range_from_record(record: object) -> np.ndarray:
+    """(J, 3, 2) [rad] the range a :func:`pose_range_record` holds.
+
+    Raises:
+        ValueError: a record without every joint's three ``[low, high]`` pairs (low <= high,
+            finite), saying what is wrong.
+    """
+    table = record.get("euler_deg") if isinstance(record, dict) else None
+    if not isinstance(table, dict):
+        raise ValueError("expected {\"frames\": T, \"euler_deg\": {joint: [[low, high] x 3]}}")
+    missing = [name for name in JOINT_NAMES if name not in table]
+    if missing:
+        raise ValueError(f"euler_deg lacks the joints {', '.join(missing)}")
+    try:
+        lim = np.array([table[name] for name in JOINT_NAMES], dtype=np.float64)
+    except (TypeError, ValueError):
+        lim = np.empty(0)
+    if lim.shape != (NUM_JOINTS, 3, 2) or not np.isfinite(lim).all() or (lim[..., 0] > lim[..., 1]).any():
+        raise ValueError("euler_deg must give each joint three finite [low, high] pairs, low <= high")
+    return np.deg2rad(lim)

@@ -35,7 +35,7 @@ from .simulate import SimConfig
 from .motion import MotionKind, MotionSpec, generate
 from .tshirt import make_tshirt, tshirt_variants
 
-__all__ = ["FactoryConfig", "MOCAP_ENV", "OWN_BODY", "OwnGarment", "own_garment_files", "save_own_garment", "load_own_garment", "load_config", "plan_jobs", "drape_pairs", "run_factory"]
+__all__ = ["FactoryConfig", "MOCAP_ENV", "OWN_BODY", "OwnGarment", "own_garment_files", "save_own_garment", "load_own_garment", "load_config", "plan_jobs", "train_poses", "drape_pairs", "run_factory"]
 
 #: The environment variable naming the mocap folder when neither the config nor ``--mocap`` does.
 MOCAP_ENV = "CLOTH_USD_MOCAP"
@@ -270,6 +270,19 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     if config.floor is not None:
         jobs += floor_jobs(_to_simulate(config, jobs), FloorSpec.from_mapping(config.floor))
     return jobs
+
+
+def train_poses(config: FactoryConfig, body=None) -> np.ndarray:
+    """(T, 72) axis-angle [rad] every frame of the config's training motions, each motion once
+    (every training garment and body wears the same ones): what a bundle trained on the config
+    records as its pose range (:func:`~cloth_usd.core.limits.pose_range_record`). No garment is
+    made."""
+    body = body if body is not None else load_body_model()
+    mean_joints = shape_body(body, np.zeros(1))[1]
+    motions = [_motion(m, config, f"train_motions[{i}]", mean_joints) for i, m in enumerate(config.train_motions)]
+    if not motions:
+        raise ArgumentError("train_motions: the config lists no training motion")
+    return np.concatenate([m.poses for m in motions])
 
 
 def _to_simulate(config: FactoryConfig, jobs: list[Job]) -> list[Job]:

@@ -29,6 +29,22 @@ def test_default_plan_has_the_papers_training_pairs():
     assert (train_shirts, train_bodies, len(config.bodies)) == (6, 8, 11)
 
 
+def test_train_poses_are_each_training_motion_once_and_make_no_garment(monkeypatch):
+    from cloth_usd.datagen import factory
+    from cloth_usd.datagen.motion import MotionSpec, generate
+
+    def no_garments(*args, **kwargs):
+        raise AssertionError("train_poses made a garment")
+
+    monkeypatch.setattr(factory, "make_tshirt", no_garments)
+    motions = [{"kind": "walk", "seconds": 1.0, "seed": 0}, {"kind": "arm_raise", "seconds": 0.5, "seed": 3}]
+    poses = factory.train_poses(FactoryConfig(**{**TINY, "max_frames": 0, "train_motions": motions}))
+    np.testing.assert_array_equal(poses, np.concatenate([generate(MotionSpec(**m))[0] for m in motions]))
+    assert factory.train_poses(FactoryConfig(**TINY)).shape == (2, 72)  # cut as the config cuts every motion
+    with pytest.raises(ArgumentError, match="train_motions: the config lists no training motion"):
+        factory.train_poses(FactoryConfig(**{**TINY, "train_motions": []}))
+
+
 def test_config_errors_name_the_file_and_key(tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"shirtz": 3}))

@@ -91,6 +91,13 @@ def test_a_physics_run_loads_and_exports_a_bundle_that_bakes(config_path, tmp_pa
     bundle = load_bundle(out)
     assert bundle.form.heading is Heading.CANONICAL and bundle.form.base is CoarseBase.SKINNED
     assert bundle.manifest["metrics"]["export_parity"]["coarse_max_m"] < 1e-4
+    # the joint angles of the config's training motions, each once, which a bake checks a shot against
+    from cloth_usd.core.limits import pose_range
+    from cloth_usd.datagen.factory import load_config, train_poses
+
+    poses = train_poses(load_config(config_path))
+    assert bundle.manifest["training_data"]["poses"]["frames"] == len(poses)
+    np.testing.assert_allclose(bundle.pose_limits, pose_range(poses), atol=np.deg2rad(0.006))
     with pytest.raises(ArgumentError, match="a run exists there"):
         train_physics(config_path, tmp_path / "run", PHYSICS, device="cpu")
 

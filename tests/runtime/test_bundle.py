@@ -119,6 +119,8 @@ def test_missing_file(tmp_path, fake_exported):
     (lambda m: m["models"]["coarse"].update(base="hips"), "models.coarse.base 'hips' is not one of body, skinned"),
     (lambda m: m["models"]["coarse"].update(features="cloth"),
      "models.coarse.features 'cloth' is not one of body, contact"),
+    (lambda m: m["training_data"].update(poses={"frames": 3, "euler_deg": {"pelvis": [[0, 1]] * 3}}),
+     "training_data.poses: euler_deg lacks the joints left_hip"),
 ])
 def test_bad_manifest(tmp_path, fake_exported, edit, expect):
     folder = write_tiny_bundle(tmp_path / "b", fake_exported)
@@ -127,6 +129,26 @@ def test_bad_manifest(tmp_path, fake_exported, edit, expect):
     (folder / "manifest.json").write_text(json.dumps(m))
     with pytest.raises(BundleError, match=expect):
         load_bundle(folder)
+
+
+def test_the_training_poses_a_bundle_records_are_its_pose_limits(tmp_path, fake_exported):
+    from cloth_usd.core.limits import pose_range, pose_range_record
+    from cloth_usd.datagen import walk_cycle
+    from cloth_usd.runtime.bundle import write_bundle
+
+    coarse, det, fit, configs = fake_exported
+    poses = walk_cycle(48)[0]
+    folder = write_bundle(tmp_path / "p", name="p", category="tshirt", coarse_onnx=coarse, detail_onnx=det,
+                          fit_npz=fit, configs=configs, training_data={"poses": pose_range_record(poses)},
+                          metrics={}, opset=18)
+    np.testing.assert_allclose(load_bundle(folder).pose_limits, pose_range(poses), atol=np.deg2rad(0.006))
+    assert load_bundle(write_tiny_bundle(tmp_path / "b", fake_exported)).pose_limits is None  # none recorded
+    with pytest.raises(ArgumentError, match="training_data.poses: euler_deg must give each joint three finite"):
+        bad = pose_range_record(poses)
+        bad["euler_deg"]["left_elbow"][1] = [10.0, -10.0]  # low above high
+        write_bundle(tmp_path / "q", name="q", category="tshirt", coarse_onnx=coarse, detail_onnx=det,
+                     fit_npz=fit, configs=configs, training_data={"poses": bad}, metrics={}, opset=18)
+    assert not (tmp_path / "q").exists()
 
 
 def test_make_bundle_script(tmp_path, fake_exported, capsys):
