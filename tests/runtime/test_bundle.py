@@ -143,9 +143,9 @@ def test_the_training_poses_a_bundle_records_are_its_pose_limits(tmp_path, fake_
                           metrics={}, opset=18)
     np.testing.assert_allclose(load_bundle(folder).pose_limits, pose_range(poses), atol=np.deg2rad(0.006))
     assert load_bundle(write_tiny_bundle(tmp_path / "b", fake_exported)).pose_limits is None  # none recorded
+    bad = pose_range_record(poses)
+    bad["euler_deg"]["left_elbow"][1] = [10.0, -10.0]  # low above high
     with pytest.raises(ArgumentError, match="training_data.poses: euler_deg must give each joint three finite"):
-        bad = pose_range_record(poses)
-        bad["euler_deg"]["left_elbow"][1] = [10.0, -10.0]  # low above high
         write_bundle(tmp_path / "q", name="q", category="tshirt", coarse_onnx=coarse, detail_onnx=det,
                      fit_npz=fit, configs=configs, training_data={"poses": bad}, metrics={}, opset=18)
     assert not (tmp_path / "q").exists()
