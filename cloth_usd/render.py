@@ -1,6 +1,6 @@
 """Render a frame of a shot (body + garments) to PNG, to look at a bake.
 
-Uses matplotlib (the ``train`` extra) with flat Lambert shading: a preview, not a
+Uses matplotlib (the ``preview`` extra; ``scripts/setup.sh`` installs it) with flat Lambert shading: a preview, not a
 production render. The body comes from the body model, the garment points from the
 composed stage, so what is drawn is what a USD viewer would show.
 """
@@ -15,7 +15,7 @@ import numpy as np
 from .core.body import lbs, load_body_model, shape_body
 from .core.frames import canonical_motion
 from .core.shards import read_shard
-from .errors import ArgumentError, OutputWriteError
+from .errors import ArgumentError, ClothUsdError, OutputWriteError
 from .usd.read import garment_points_internal, open_stage, read_motion, read_scene
 
 __all__ = ["draw_panels", "posed_bodies", "render_frames", "render_shard", "shard_frames"]
@@ -40,7 +40,11 @@ def draw_panels(panels: Sequence[tuple[str, list[tuple[np.ndarray, tuple[float, 
     Args:
         panels: per panel its title and meshes, each ``(triangles (F, 3, 3) [m] Y-up, rgb)``.
     """
-    import matplotlib
+    try:
+        import matplotlib
+    except ImportError as exc:
+        raise ClothUsdError(f"cloth-usd render draws with matplotlib ({exc}); install it with pip install "
+                            "'cloth-usd[preview]'") from exc
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt

@@ -44,3 +44,44 @@ def test_only_the_usd_package_imports_pxr():
             if any(n == "pxr" or n.startswith("pxr.") for n in names):
                 found.add(rel.as_posix())
     assert found == _PXR_OUTSIDE_USD, f"pxr imported outside cloth_usd/usd: {sorted(found - _PXR_OUTSIDE_USD)}"
+
+
+#: Packages the README's first command (``scripts/setup.sh``: the ``runtime`` and ``preview``
+#: extras) does not install: the bake must not import any of them, at module level or on its way.
+_NOT_INSTALLED_FOR_BAKING = ("trimesh", "newton", "warp", "torch", "smplx", "sklearn", "fast_simplification",
+                             "ray", "onnx")
+
+
+def _cli_without(blocked: tuple[str, ...], *args: str) -> subprocess.CompletedProcess:
+    """Run the CLI in a fresh interpreter where importing any of ``blocked`` fails."""
+    code = ("import sys\n"
+            "class Blocked:  # importing one of them raises ModuleNotFoundError, as if not installed\n"
+            "    def find_spec(self, name, path=None, target=None):\n"
+            f"        if name.split('.')[0] in {blocked!r}:\n"
+            "            raise ModuleNotFoundError(f'No module named {name!r}', name=name)\n"
+            "sys.meta_path.insert(0, Blocked())\n"
+            "from cloth_usd.cli import main\n"
+            f"raise SystemExit(main({list(args)!r}))\n")
+    return subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+
+
+def test_the_first_command_bakes_the_sample_without_the_training_and_simulation_extras(tmp_path):
+    """The CLI once imported the garment maker (and with it trimesh) for every command: the
+    README's first command failed in the environment it makes."""
+    from pathlib import Path
+
+    sample = Path(__file__).resolve().parents[1] / "samples" / "walk_tshirt" / "scene.usda"
+    done = _cli_without(_NOT_INSTALLED_FOR_BAKING, "bake", str(sample), "-o", str(tmp_path / "c.usdc"),
+                        "--frames", "1001:1004", "--tier", "detail", "--no-progress")
+    assert done.returncode == 0, done.stderr[-3000:]
+    assert (tmp_path / "c.usdc").is_file()
+
+
+def test_render_without_matplotlib_is_one_line_naming_the_extra(tmp_path):
+    from pathlib import Path
+
+    sample = Path(__file__).resolve().parents[1] / "samples" / "walk_tshirt" / "scene.usda"
+    done = _cli_without(("matplotlib",), "render", str(sample), "-o", str(tmp_path / "r.png"), "--frames", "1001")
+    assert done.returncode == 2 and not (tmp_path / "r.png").exists()
+    (line,) = done.stderr.strip().splitlines()
+    assert "cloth-usd render draws with matplotlib" in line and "pip install 'cloth-usd[preview]'" in line

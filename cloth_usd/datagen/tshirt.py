@@ -12,12 +12,24 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
 
 from ..core.association import associate
 from ..core.body import BodyModel, shape_body
+from ..errors import ClothUsdError
 
 __all__ = ["TShirtParams", "make_tshirt", "tshirt_variants"]
+
+
+def _trimesh():
+    """trimesh, imported when a T-shirt is made (the ``datagen`` extra): importing this module,
+    as the CLI does for every command, must not need it, since a bake never does."""
+    try:
+        import trimesh
+    except ImportError as exc:
+        raise ClothUsdError(f"making a T-shirt needs trimesh ({exc}); install it with pip install "
+                            "'cloth-usd[datagen]'") from exc
+    return trimesh
+
 
 _PELVIS, _NECK, _HEAD, _L_SHOULDER, _R_SHOULDER = 0, 12, 15, 16, 17
 
@@ -51,6 +63,7 @@ class TShirtParams:
 
 def _count_rims(faces: np.ndarray) -> int:
     """Number of boundary loops of a triangle mesh."""
+    trimesh = _trimesh()
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     uniq, counts = np.unique(edges, axis=0, return_counts=True)
     rim = uniq[counts == 1]
@@ -85,6 +98,7 @@ def _region(v: np.ndarray, joints: np.ndarray, weights: np.ndarray, p: TShirtPar
 
 
 def _submesh(v: np.ndarray, f: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    trimesh = _trimesh()
     faces = f[keep[f].all(axis=1)]
     mesh = trimesh.Trimesh(v, faces, process=False)
     parts = mesh.split(only_watertight=False)
@@ -115,6 +129,7 @@ def _push_out(v: np.ndarray, body_v: np.ndarray, body_f: np.ndarray, rest_on: fl
               ease: np.ndarray) -> np.ndarray:
     """Move garment vertices that are closer to the body than their clearance (see
     :func:`_clearance`), or inside it, out along the body normal."""
+    trimesh = _trimesh()
     body = trimesh.Trimesh(body_v, body_f, process=False)
     normals = np.asarray(body.vertex_normals)
     assoc = associate(v, body_v, body_f)
@@ -144,6 +159,7 @@ def make_tshirt(body: BodyModel, betas: np.ndarray, params: TShirtParams = TShir
     Returns:
         ``(vertices (N, 3) float64 [m] canonical body frame, faces (M, 3) int64)``.
     """
+    trimesh = _trimesh()
     v_body, joints = shape_body(body, betas)
     hem_y = hem_height(body, v_body, joints, params)
     keep = _region(v_body, joints, body.weights, params, hem_y)
