@@ -582,6 +582,13 @@ def _on_sigterm(signum, frame) -> None:
     raise _Terminated()
 
 
+#: The optional dependencies a command may import, and the extra (pyproject.toml) that installs each.
+_EXTRAS = {"torch": "train", "smplx": "train", "sklearn": "train", "onnx": "train", "onnxscript": "train",
+           "matplotlib": "preview", "trimesh": "datagen", "newton": "datagen", "warp": "datagen",
+           "fast_simplification": "datagen", "ray": "ray", "OpenEXR": "game", "onnxruntime": "runtime"}
+_TORCH_FIRST = " (pip install torch==2.13.0 first where that CPU build is at hand, or pip fetches a CUDA build)"
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Run the CLI; returns the process exit code."""
     args = _parser().parse_args(argv)
@@ -599,6 +606,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.verbose:
             sys.stderr.write(traceback.format_exc())
         sys.stderr.write(f"cloth-usd: error: {exc}\n")
+        return 2
+    except ModuleNotFoundError as exc:
+        extra = _EXTRAS.get((exc.name or "").split(".")[0])
+        if extra is None:  # not an optional dependency: a bug, shown whole
+            raise
+        if args.verbose:
+            sys.stderr.write(traceback.format_exc())
+        sys.stderr.write(f"cloth-usd: error: cloth-usd {args.command} needs {exc.name}, which is not installed: "
+                         f"pip install 'cloth-usd[{extra}]'{_TORCH_FIRST if extra == 'train' else ''}\n")
         return 2
     except KeyboardInterrupt:
         sys.stderr.write("cloth-usd: interrupted; no output was written\n")

@@ -85,3 +85,15 @@ def test_render_without_matplotlib_is_one_line_naming_the_extra(tmp_path):
     assert done.returncode == 2 and not (tmp_path / "r.png").exists()
     (line,) = done.stderr.strip().splitlines()
     assert "cloth-usd render draws with matplotlib" in line and "pip install 'cloth-usd[preview]'" in line
+
+
+def test_a_command_without_its_extra_is_one_line_naming_it(tmp_path):
+    from pathlib import Path
+
+    config = Path(__file__).resolve().parents[1] / "configs" / "physics_tshirt_mocap.json"
+    done = _cli_without(("torch",), "train", "coarse", "--objective", "physics", "--data", str(config),
+                        "-o", str(tmp_path / "run"))
+    assert done.returncode == 2, done.stderr[-2000:]
+    (line,) = done.stderr.strip().splitlines()
+    assert line.startswith("cloth-usd: error: cloth-usd train needs torch, which is not installed: "
+                           "pip install 'cloth-usd[train]'"), line
