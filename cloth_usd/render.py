@@ -1,8 +1,8 @@
 """Render a frame of a shot (body + garments) to PNG, to look at a bake.
 
-Uses matplotlib (the ``preview`` extra; ``scripts/setup.sh`` installs it) with flat Lambert shading: a preview, not a
-production render. The body comes from the body model, the garment points from the
-composed stage, so what is drawn is what a USD viewer would show.
+Uses matplotlib (the ``preview`` extra; ``scripts/setup.sh`` installs it) with flat Lambert
+shading: a preview, not a production render. The body comes from the body model, the
+garment points from the composed stage, so what is drawn is what a USD viewer would show.
 """
 
 from __future__ import annotations

@@ -127,8 +127,7 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
     if inside > INSIDE_AT_REST:
         warnings.append(f"{where}: {inside:.0%} of the garment's vertices lie more than {INSIDE_DEPTH * 1e3:g} mm "
                         f"inside the body <{char.prim_path}> at rest (up to {depth.max() * 1e3:.0f} mm): it was "
-                        "made for another body shape, or sits in the body; every tier starts from it "
-                        "there")
+                        "made for another body shape, or sits in the body; every tier starts from it there")
     distance = float(binding.association.distance.mean())
     if distance > FAR_FROM_BODY:
         warnings.append(f"{where}: the garment lies {distance:.2f} m from the body <{char.prim_path}> on "
