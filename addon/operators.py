@@ -99,8 +99,18 @@ class CLOTH_USD_OT_bake(Operator):
                 return {'CANCELLED'}
             advance(3)
         frames = result.times.shape[0]
-        self.report({'INFO'}, f"Baked {len(result.garments)} garment(s), {frames} frames in "
-                              f"{result.seconds:.2f} s: {result.cache.name}")
+        warnings = [w for g in result.garments for w in g.warnings]  # the guard's and the trained range's
+        settings.bake_warnings.clear()
+        for text in warnings:
+            item = settings.bake_warnings.add()
+            item.kind, item.text = "WARNING", text
+            self.report({'WARNING'}, text)  # each in the Info editor
+        done = (f"Baked {len(result.garments)} garment(s), {frames} frames in {result.seconds:.2f} s: "
+                f"{result.cache.name}")
+        if warnings:
+            self.report({'WARNING'}, f"{done}, with {len(warnings)} warning(s) (listed in the panel)")
+        else:
+            self.report({'INFO'}, done)
         return {'FINISHED'}
 
 

@@ -41,6 +41,10 @@ class CLOTH_USD_PT_bake(Panel):
             col.label(text=f"Writes {paths[0].name}", icon='FILE')
         col.prop(settings, "overwrite")
         layout.operator("cloth_usd.bake", icon='MOD_CLOTH')
+        if len(settings.bake_warnings):
+            box = layout.box()
+            for item in settings.bake_warnings:
+                box.label(text=item.text, icon=ITEM_ICONS.get(item.kind, 'DOT'))
 
 
 classes = (CLOTH_USD_PT_bake,)

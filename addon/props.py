@@ -28,7 +28,7 @@ _FRAME_RANGES = [
 
 #: Icons of the inspection lines, by kind.
 ITEM_ICONS = {"STAGE": "SCENE_DATA", "CHARACTER": "ARMATURE_DATA", "GARMENT": "MOD_CLOTH",
-              "PROBLEM": "ERROR"}
+              "PROBLEM": "ERROR", "WARNING": "ERROR"}
 
 
 class ClothUsdPreferences(AddonPreferences):
@@ -56,7 +56,7 @@ class ClothUsdPreferences(AddonPreferences):
 
 
 class ClothUsdInspectItem(PropertyGroup):
-    """One line of what Inspect found in the shot."""
+    """One line of what Inspect found in the shot, or of what the last bake warned about."""
 
     kind: StringProperty()  # a key of ITEM_ICONS
     text: StringProperty()
@@ -102,6 +102,11 @@ class ClothUsdSettings(PropertyGroup):
         default=False,
     )
     inspected: CollectionProperty(type=ClothUsdInspectItem)
+    bake_warnings: CollectionProperty(
+        type=ClothUsdInspectItem,
+        description="What the last bake warned about (frames the guard replaced, poses and garments "
+                    "outside what the models were trained on), one line each",
+    )
     baked_cache: StringProperty(
         description="Cache layer of this scene's last bake (its files may be replaced)",
         subtype='FILE_PATH',

@@ -54,11 +54,12 @@ def _walk(frames: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def make_tube_shot(path: Path, *, up: str = "Y", meters_per_unit: float = 1.0, frames: int = 24,
-                   broken: str | None = None) -> Path:
+                   broken: str | None = None, ease: float = 0.02) -> Path:
     """A walking character wearing a tube, saved at ``path``; time codes 1001...
 
     ``broken``: ``"nan"`` makes a garment point NaN, ``"joint"`` renames the left elbow
-    joint, so that a bake must fail.
+    joint, so that a bake must fail. ``ease`` [m]: the tube's clearance over the body (a
+    negative one puts it in the body).
     """
     from pxr import Usd, UsdGeom, UsdSkel, Vt
 
@@ -75,7 +76,7 @@ def make_tube_shot(path: Path, *, up: str = "Y", meters_per_unit: float = 1.0, f
     vertices, joints = shape_body(body, betas)
     poses, root = _walk(frames)
     times = 1001.0 + np.arange(frames)
-    points, quads = _tube(vertices, joints)
+    points, quads = _tube(vertices, joints, ease=ease)
     path.parent.mkdir(parents=True, exist_ok=True)
     stage = Usd.Stage.CreateNew(str(path))
     set_stage_metadata(stage, up_axis=up, meters_per_unit=meters_per_unit, fps=24.0,

@@ -246,6 +246,24 @@ def test_bake_imports_an_animated_garment_that_matches_the_cache(blender, prefs,
     assert moved.max() > 0.05  # the garment walks along: the check above is not trivially true
 
 
+def test_what_a_bake_warns_about_is_listed_in_the_panel(blender, shot, tmp_path):
+    """The guard's replacements and inputs outside the trained range were logged only: an
+    animator baking from the panel saw none of them."""
+    tight = make_tube_shot(tmp_path / "tight" / "shot.usda", frames=4, ease=-0.03)  # the tube in the body
+    settings = bpy.context.scene.cloth_usd
+    assert bake_op(shot_path=str(tight)) == {"FINISHED"}
+    (item,) = settings.bake_warnings
+    assert item.kind == "WARNING" and "inside the body </Character/Skeleton> at rest" in item.text
+
+    log: list = []
+    bpy.types.CLOTH_USD_PT_bake.draw(SimpleNamespace(layout=FakeLayout(log)), bpy.context)
+    assert [text for kind, text in log if kind == "label"][-1] == item.text  # below the Bake button
+
+    clean = shot("sample")  # (the tubes' ellipses cut into the body's flanks: they warn too)
+    assert bake_op(shot_path=str(clean), frame_range="CUSTOM", frame_start=1001, frame_end=1004) == {"FINISHED"}
+    assert len(settings.bake_warnings) == 0  # a clean bake clears the list
+
+
 def test_rebake_replaces_the_import_without_duplicates_or_orphans(blender, shot):
     path = shot("tube_y_m")
     settings = dict(shot_path=str(path), frame_range="CUSTOM", frame_start=1001, frame_end=1010)
