@@ -81,10 +81,11 @@ def read_points(cache: Path, prim: str = PRIM) -> np.ndarray:
     return np.stack([np.array(layer.QueryTimeSample(attr, t)) for t in layer.ListTimeSamplesForPath(attr)])
 
 
-def fake_bundle(folder: Path, scale: float, poses: np.ndarray | None = None) -> Path:
+def fake_bundle(folder: Path, scale: float, poses: np.ndarray | None = None, far_fit: bool = False) -> Path:
     """A coarse-tier bundle whose "model" moves each vertex by ``scale`` [m] along the body
     normal (an ONNX graph made by hand: Slice(features, 0:3) * scale); with ``poses`` (T, 72)
-    it records their range as the poses it was trained on, else none."""
+    it records their range as the poses it was trained on, else none. ``far_fit``: its fit
+    model's garments lay a metre off the anchors, so any garment's fit attribute is far out."""
     onnx = pytest.importorskip("onnx", reason="building a test bundle needs onnx")
     pytest.importorskip("onnxruntime", reason="the learned tiers need onnxruntime")
     from onnx import TensorProto, helper, numpy_helper
@@ -104,8 +105,9 @@ def fake_bundle(folder: Path, scale: float, poses: np.ndarray | None = None) -> 
     onnx.save(helper.make_model(graph, opset_imports=[helper.make_opsetid("", 18)], ir_version=9),
               folder / "coarse_src.onnx")
     rng = np.random.default_rng(0)
-    FitModel(anchors=np.array([412, 1290, 3021, 3500, 4200, 6540]), mean=np.full(6, 0.02),
-             loadings=rng.normal(0, 0.01, (6, 3)), noise_variance=np.ones(6)).save(folder / "fit_src.npz")
+    FitModel(anchors=np.array([412, 1290, 3021, 3500, 4200, 6540]), mean=np.full(6, -1.0 if far_fit else 0.02),
+             loadings=rng.normal(0, 0.01, (6, 3)),
+             noise_variance=np.full(6, 1e-6 if far_fit else 1.0)).save(folder / "fit_src.npz")
     return write_bundle(folder / "bundle", name=f"fake-{scale}", category="tshirt",
                         coarse_onnx=folder / "coarse_src.onnx", detail_onnx=None, fit_npz=folder / "fit_src.npz",
                         configs={}, training_data={"manifest_sha256": "0" * 64, "description": "tests only",
@@ -231,6 +233,19 @@ def test_a_garment_inside_its_body_at_rest_is_warned_about(body, tmp_path, caplo
     (message,) = [m for m in _warnings(caplog) if "inside the body" in m]
     assert f"<{PRIM}>: " in message and "lie more than 2 mm inside the body </Char/Skel> at rest" in message
     assert message in result.garments[0].warnings
+
+
+def test_a_fit_past_the_limit_is_clamped_and_warned_about(posed_stage, tmp_path, caplog):
+    from cloth_usd.core.fit import FIT_LIMIT
+
+    bundle = fake_bundle(tmp_path / "far", 0.005, far_fit=True)
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
+        result = bake(posed_stage, tmp_path / "c.usdc", tier="coarse", models=bundle)
+    (message,) = [m for m in _warnings(caplog) if "fit attribute" in m]
+    assert f"<{PRIM}>: its fit on the body </Char/Skel>" in message
+    assert f"the coarse tier reads it clamped to +-{FIT_LIMIT:g}" in message
+    g = result.garments[0]
+    assert message in g.warnings and max(abs(a) for a in g.fit) == pytest.approx(FIT_LIMIT)
 
 
 def _degenerate(joints):

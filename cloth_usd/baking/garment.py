@@ -11,6 +11,7 @@ from tqdm.auto import tqdm
 
 from ..core.body import BodyModel, shape_body
 from ..core.features import vertex_normals
+from ..core.fit import FIT_LIMIT
 from ..core.frames import CanonicalMotion
 from ..core.graph import directed_edges
 from ..core.guard import GuardLimits, check_frames
@@ -133,6 +134,12 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
         warnings.append(f"{where}: the garment lies {distance:.2f} m from the body <{char.prim_path}> on "
                         f"average at rest (a worn garment is within {FAR_FROM_BODY:g} m); check its "
                         "cloth:body and rest points")
+    measured = None if learned is None else learned.pair.alpha_measured
+    if measured is not None and np.any(np.abs(measured) > FIT_LIMIT):
+        listed = ", ".join(f"{a:.3g}" for a in measured)
+        warnings.append(f"{where}: its fit on the body <{char.prim_path}> (fit attribute {listed}) lies past "
+                        f"+-{FIT_LIMIT:g} on a factor, beyond the garments bundle '{bundle.name}' was trained on; the "
+                        f"{tier.value} tier reads it clamped to +-{FIT_LIMIT:g}")
     for w in warnings:
         log.warning("%s", w)
     poses, transl = motion.poses, motion.transl

@@ -36,7 +36,7 @@ from .association import incident_faces
 from .body import BodyModel, lbs, shape_body
 from .features import (CONTACT_FEATURES, COARSE_FEATURES, attributes, coarse_features, contact_features,
                        detail_features, vertex_normals)
-from .fit import FitModel, pair_distances
+from .fit import FIT_LIMIT, FitModel, pair_distances
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
 from .postprocess import DEFAULT_MARGIN, push_out_of_surface, search_tree
@@ -119,9 +119,12 @@ class GarmentPair:
     graph: MeshGraph
     """The garment graph (neighbour table and one pooling level)."""
     alpha: np.ndarray
-    """(F,) float64 the pair's fit attribute."""
+    """(F,) float64 the pair's fit attribute, as the models read it (clamped to
+    :data:`~cloth_usd.core.fit.FIT_LIMIT`)."""
     patch: BodyPatch
     """The body vertices the garment's features and post-process read."""
+    alpha_measured: np.ndarray | None = None
+    """(F,) float64 the fit attribute before the clamp (None: not measured apart)."""
 
     @property
     def assoc_vertex(self) -> np.ndarray:
@@ -269,12 +272,13 @@ def prepare_pair(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray, fa
     v_shaped, joints = shape_body(body, betas)
     graph = build_graph(faces, rest_points)
     d = pair_distances(rest_points, binding.association, v_shaped, fit.anchors)
-    alpha = np.asarray(fit.transform(d), dtype=np.float64)
+    measured = np.asarray(fit.transform(d), dtype=np.float64)
+    alpha = np.clip(measured, -FIT_LIMIT, FIT_LIMIT)
     patch = body_patch(body.faces, binding.association.vertex,
                        np.union1d(body_under(v_shaped, rest_points, arms_down=_arms_down(body, v_shaped, joints)),
                                   swinging_parts(body)))
     return GarmentPair(betas=betas, faces=faces, binding=binding, v_shaped=v_shaped, joints=joints,
-                       graph=graph, alpha=alpha, patch=patch)
+                       graph=graph, alpha=alpha, patch=patch, alpha_measured=measured)
 
 
 def pose_body(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray) -> PosedBody:

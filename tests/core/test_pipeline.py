@@ -180,3 +180,22 @@ def test_coarse_form_reads_the_manifest_strings_and_refuses_others():
     for bad in ({"base": "hips"}, {"heading": "north"}, {"features": "colour"}):
         with pytest.raises(ValueError):
             CoarseForm(**bad)
+
+
+def test_a_fit_far_outside_training_is_clamped_for_the_models():
+    """A shirt sewn for a betas 3, 3 body read -18 on the fit's third factor, and the detail
+    model tore it; the models read the fit clamped to FIT_LIMIT, the measured one is kept."""
+    import dataclasses
+
+    from cloth_usd.core.fit import FIT_LIMIT
+
+    body = load_body_model()
+    rest, faces = make_tshirt(body, np.zeros(10), TShirtParams(target_vertices=600))
+    fit = find_bundle("tshirt").fit
+    far = dataclasses.replace(fit, mean=fit.mean - 0.5)  # every anchor 50 cm nearer than any training garment's
+    pair = prepare_pair(body, np.zeros(10), rest, faces, far)
+    assert np.abs(pair.alpha_measured).max() > FIT_LIMIT
+    np.testing.assert_array_equal(pair.alpha, np.clip(pair.alpha_measured, -FIT_LIMIT, FIT_LIMIT))
+    inside = prepare_pair(body, np.zeros(10), rest, faces, fit)  # within the limit: read as measured
+    assert np.abs(inside.alpha_measured).max() <= FIT_LIMIT
+    np.testing.assert_array_equal(inside.alpha, inside.alpha_measured)
