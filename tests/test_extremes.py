@@ -20,7 +20,7 @@ from cloth_usd.baking import bake
 from cloth_usd.core.guard import GuardLimits
 from cloth_usd.errors import GarmentError
 from cloth_usd.core.body import load_body_model, shape_body
-from cloth_usd.core.limits import JOINT_LIMITS, pose_outliers, pose_range, pose_range_record
+from cloth_usd.core.limits import JOINT_LIMITS, betas_range_record, pose_outliers, pose_range, pose_range_record
 from cloth_usd.datagen import walk_cycle
 from cloth_usd.datagen.motion import JOINT_LIMITS as DATAGEN_LIMITS
 from cloth_usd.datagen.motion import euler_to_poses
@@ -81,11 +81,13 @@ def read_points(cache: Path, prim: str = PRIM) -> np.ndarray:
     return np.stack([np.array(layer.QueryTimeSample(attr, t)) for t in layer.ListTimeSamplesForPath(attr)])
 
 
-def fake_bundle(folder: Path, scale: float, poses: np.ndarray | None = None, far_fit: bool = False) -> Path:
+def fake_bundle(folder: Path, scale: float, poses: np.ndarray | None = None, far_fit: bool = False,
+                bodies: np.ndarray | None = None) -> Path:
     """A coarse-tier bundle whose "model" moves each vertex by ``scale`` [m] along the body
     normal (an ONNX graph made by hand: Slice(features, 0:3) * scale); with ``poses`` (T, 72)
     it records their range as the poses it was trained on, else none. ``far_fit``: its fit
-    model's garments lay a metre off the anchors, so any garment's fit attribute is far out."""
+    model's garments lay a metre off the anchors, so any garment's fit attribute is far out.
+    ``bodies`` (K, 10): the betas of the bodies it records it was trained on, else none."""
     onnx = pytest.importorskip("onnx", reason="building a test bundle needs onnx")
     pytest.importorskip("onnxruntime", reason="the learned tiers need onnxruntime")
     from onnx import TensorProto, helper, numpy_helper
@@ -108,11 +110,14 @@ def fake_bundle(folder: Path, scale: float, poses: np.ndarray | None = None, far
     FitModel(anchors=np.array([412, 1290, 3021, 3500, 4200, 6540]), mean=np.full(6, -1.0 if far_fit else 0.02),
              loadings=rng.normal(0, 0.01, (6, 3)),
              noise_variance=np.full(6, 1e-6 if far_fit else 1.0)).save(folder / "fit_src.npz")
+    training = {"manifest_sha256": "0" * 64, "description": "tests only"}
+    if poses is not None:
+        training["poses"] = pose_range_record(poses)
+    if bodies is not None:
+        training["bodies"] = betas_range_record(bodies)
     return write_bundle(folder / "bundle", name=f"fake-{scale}", category="tshirt",
                         coarse_onnx=folder / "coarse_src.onnx", detail_onnx=None, fit_npz=folder / "fit_src.npz",
-                        configs={}, training_data={"manifest_sha256": "0" * 64, "description": "tests only",
-                                                   **({} if poses is None else {"poses": pose_range_record(poses)})},
-                        metrics={}, opset=18)
+                        configs={}, training_data=training, metrics={}, opset=18)
 
 
 @pytest.fixture(scope="module")
@@ -233,6 +238,24 @@ def test_a_garment_inside_its_body_at_rest_is_warned_about(body, tmp_path, caplo
     (message,) = [m for m in _warnings(caplog) if "inside the body" in m]
     assert f"<{PRIM}>: " in message and "lie more than 2 mm inside the body </Char/Skel> at rest" in message
     assert message in result.garments[0].warnings
+
+
+def test_a_body_past_the_bodies_a_bundle_was_trained_on_is_warned_about(body, tmp_path, caplog):
+    """A body of betas 3, 3 lies past every body the T-shirt bundle saw (within +-2) but inside
+    |beta| <= 3: the shape warning now measures against the bundle's own bodies."""
+    scene = write_stage(tmp_path / "s.usda", body, betas=[3.0, 3.0])
+    trained = np.zeros((2, 10))
+    trained[:, :2] = [[-2.0, 2.0], [2.0, -2.0]]
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
+        result = bake(scene, tmp_path / "c.usdc", tier="coarse",
+                      models=fake_bundle(tmp_path / "b", 0.005, bodies=trained))
+    (message,) = [m for m in _warnings(caplog) if "beta[0]" in m]
+    assert ("has beta[0] = 3, beta[1] = 3, outside the bodies bundle 'fake-0.005' was trained on (beta[0] -2..2, "
+            "beta[1] -2..2, by more than 0.5)") in message and message in result.garments[0].warnings
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
+        bake(scene, tmp_path / "k.usdc")  # the skinning tier: |beta| <= 3 holds, nothing to say
+    assert not [m for m in _warnings(caplog) if "beta[0]" in m]
 
 
 def test_a_fit_past_the_limit_is_clamped_and_warned_about(posed_stage, tmp_path, caplog):

@@ -15,7 +15,7 @@ from ..core.fit import FIT_LIMIT
 from ..core.frames import CanonicalMotion
 from ..core.graph import directed_edges
 from ..core.guard import GuardLimits, check_frames
-from ..core.limits import BETA_LIMIT, betas_outside, pose_outliers
+from ..core.limits import BETA_LIMIT, BETA_MARGIN, betas_outside, betas_outside_range, pose_outliers
 from ..core.provenance import GarmentReport
 from ..core.scene import Character, Garment, Tier
 from ..core.skinning import SkinBinding, bind_worn, skin_garment
@@ -48,7 +48,10 @@ def range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray,
                 bundle: ModelBundle | None = None) -> list[str]:
     """What in a character's shape and motion lies outside the trained range, one line each.
 
-    The shape is checked against the training bodies' ``|beta| <= BETA_LIMIT``. The poses are
+    The shape is checked against the bodies the bundle was trained on
+    (:attr:`~cloth_usd.runtime.bundle.ModelBundle.betas_limits`, give or take
+    :data:`~cloth_usd.core.limits.BETA_MARGIN`), or, for the skinning tier and a bundle that
+    records none, against ``|beta| <= BETA_LIMIT``. The poses are
     checked for a learned tier only (``bundle``; skinning follows any pose and was trained on
     none): against the joint angles the bundle was trained on
     (:attr:`~cloth_usd.runtime.bundle.ModelBundle.pose_limits`), or, for a bundle that records
@@ -59,11 +62,22 @@ def range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray,
         bundle: the learned tier's bundle; None for the skinning tier.
     """
     notes = []
-    outside = betas_outside(char.betas)
-    if outside.size:
-        listed = ", ".join(f"beta[{i}] = {char.betas[i]:g}" for i in outside)
-        notes.append(f"body <{char.prim_path}> has {listed}, outside the trained range "
-                     f"|beta| <= {BETA_LIMIT:g}, at every frame")
+    limits = None if bundle is None else bundle.betas_limits
+    if limits is not None:  # the bodies this bundle was trained on
+        outside = betas_outside_range(char.betas, limits)
+        if outside.size:
+            lim = np.zeros((len(char.betas), 2))
+            lim[:min(len(lim), len(limits))] = limits[:len(lim)]
+            listed = ", ".join(f"beta[{i}] = {char.betas[i]:g}" for i in outside)
+            spans = ", ".join(f"beta[{i}] {lim[i, 0]:g}..{lim[i, 1]:g}" for i in outside)
+            notes.append(f"body <{char.prim_path}> has {listed}, outside the bodies bundle '{bundle.name}' was "
+                         f"trained on ({spans}, by more than {BETA_MARGIN:g}), at every frame")
+    else:
+        outside = betas_outside(char.betas)
+        if outside.size:
+            listed = ", ".join(f"beta[{i}] = {char.betas[i]:g}" for i in outside)
+            notes.append(f"body <{char.prim_path}> has {listed}, outside the trained range "
+                         f"|beta| <= {BETA_LIMIT:g}, at every frame")
     poses = None if bundle is None else pose_outliers(motion.poses, limits=bundle.pose_limits)
     if poses is not None:
         first = times[poses.frames[0]]

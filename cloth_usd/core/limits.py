@@ -19,12 +19,16 @@ from scipy.spatial.transform import Rotation
 
 from .smpl import JOINT_NAMES, NUM_JOINTS
 
-__all__ = ["BETA_LIMIT", "BETA_MAX", "EULER_ORDERS", "JOINT_LIMITS", "PoseOutlier", "betas_outside", "pose_outliers",
-           "pose_range", "pose_range_from_record", "pose_range_record", "poses_to_euler"]
+__all__ = ["BETA_LIMIT", "BETA_MARGIN", "BETA_MAX", "EULER_ORDERS", "JOINT_LIMITS", "PoseOutlier", "betas_outside",
+           "betas_outside_range", "betas_range_from_record", "betas_range_record", "pose_outliers", "pose_range",
+           "pose_range_from_record", "pose_range_record", "poses_to_euler"]
 
 #: Largest ``|beta|`` of the bodies the models were trained on (SMPL's shape space is
 #: a PCA in standard deviations; beyond 3 the bodies are implausible).
 BETA_LIMIT = 3.0
+#: How far past the range of its training bodies [standard deviations] a body's shape
+#: coefficient may lie before the bake warns (:func:`betas_outside_range`).
+BETA_MARGIN = 0.5
 #: Largest ``|beta|`` a stage may author at all: past it a body is not a body (at 1e30 its
 #: points lie 5e24 m away), so the stage is refused rather than warned about.
 BETA_MAX = 10.0
@@ -197,3 +201,50 @@ def pose_range_from_record(record: object) -> np.ndarray:
     if lim.shape != (NUM_JOINTS, 3, 2) or not np.isfinite(lim).all() or (lim[..., 0] > lim[..., 1]).any():
         raise ValueError("euler_deg must give each joint three finite [low, high] pairs, low <= high")
     return np.deg2rad(lim)
+
+
+def betas_range_record(betas: np.ndarray) -> dict:
+    """The range of training bodies' shapes as a bundle manifest records it (JSON):
+    ``{"count": K, "betas": [[low, high] per coefficient]}``.
+
+    Args:
+        betas: (K, B) float shape coefficients of the K training bodies, K > 0.
+    """
+    b = np.asarray(betas, dtype=np.float64)
+    if b.ndim != 2 or b.shape[0] == 0 or not np.isfinite(b).all():
+        raise ValueError(f"betas must be (K, B) finite with K > 0, got {b.shape}")
+    return {"count": int(b.shape[0]),
+            "betas": [[round(float(lo), 4), round(float(hi), 4)] for lo, hi in zip(b.min(axis=0), b.max(axis=0))]}
+
+
+def betas_range_from_record(record: object) -> np.ndarray:
+    """(B, 2) the ``[low, high]`` per coefficient a :func:`betas_range_record` holds.
+
+    Raises:
+        ValueError: a record without finite ``[low, high]`` pairs (low <= high), saying what is wrong.
+    """
+    rows = record.get("betas") if isinstance(record, dict) else None
+    try:
+        lim = np.array(rows, dtype=np.float64)
+    except (TypeError, ValueError):
+        lim = np.empty(0)
+    if lim.ndim != 2 or lim.shape[1] != 2 or lim.shape[0] == 0 or not np.isfinite(lim).all() \
+            or (lim[:, 0] > lim[:, 1]).any():
+        raise ValueError("expected {\"count\": K, \"betas\": [[low, high] per coefficient]}, finite, low <= high")
+    return lim
+
+
+def betas_outside_range(betas: np.ndarray, limits: np.ndarray, margin: float = BETA_MARGIN) -> np.ndarray:
+    """Indices of the shape coefficients more than ``margin`` outside ``limits``.
+
+    Args:
+        betas: (B',) shape coefficients; those past ``limits``' B count against 0..0.
+        limits: (B, 2) ``[low, high]`` per coefficient (:func:`betas_range_from_record`).
+    Returns:
+        (K,) int64 indices into ``betas``.
+    """
+    b = np.asarray(betas, dtype=np.float64)
+    lim = np.zeros((b.shape[0], 2))
+    n = min(b.shape[0], limits.shape[0])
+    lim[:n] = limits[:n]
+    return np.flatnonzero((b < lim[:, 0] - margin) | (b > lim[:, 1] + margin))

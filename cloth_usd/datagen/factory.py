@@ -35,7 +35,7 @@ from .simulate import SimConfig
 from .motion import MotionKind, MotionSpec, generate
 from .tshirt import make_tshirt, tshirt_variants
 
-__all__ = ["FactoryConfig", "MOCAP_ENV", "OWN_BODY", "OwnGarment", "own_garment_files", "save_own_garment", "load_own_garment", "load_config", "plan_jobs", "train_poses", "drape_pairs", "run_factory"]
+__all__ = ["FactoryConfig", "MOCAP_ENV", "OWN_BODY", "OwnGarment", "own_garment_files", "save_own_garment", "load_own_garment", "load_config", "plan_jobs", "train_poses", "train_betas", "drape_pairs", "run_factory"]
 
 #: The environment variable naming the mocap folder when neither the config nor ``--mocap`` does.
 MOCAP_ENV = "CLOTH_USD_MOCAP"
@@ -283,6 +283,20 @@ def train_poses(config: FactoryConfig, body=None) -> np.ndarray:
     if not motions:
         raise ArgumentError("train_motions: the config lists no training motion")
     return np.concatenate([m.poses for m in motions])
+
+
+def train_betas(config: FactoryConfig) -> np.ndarray:
+    """(K, B) the shape coefficients of the config's training bodies (its own garments' bodies
+    among them, read from their files): what a bundle trained on the config records as its
+    range of bodies (:func:`~cloth_usd.core.limits.betas_range_record`)."""
+    names = [b for b in config.bodies if b not in config.test_bodies]
+    rows = [s.betas for s in body_shapes([b for b in names if b != OWN_BODY])]
+    if OWN_BODY in names:
+        rows += [load_own_garment(f).betas for f in own_garment_files(config)]
+    if not rows:
+        raise ArgumentError("bodies: the config lists no training body")
+    width = max(len(r) for r in rows)
+    return np.stack([np.pad(np.asarray(r, dtype=np.float64), (0, width - len(r))) for r in rows])
 
 
 def _to_simulate(config: FactoryConfig, jobs: list[Job]) -> list[Job]:

@@ -184,8 +184,8 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
     planned = ("physics", "hybrid")  # the data kinds of runs trained on a data set config's planned sequences
     if coarse.info["data"].get("kind") in planned:
         from ..core.body import load_body_model
-        from ..core.limits import pose_range_record
-        from ..datagen.factory import load_config, train_poses
+        from ..core.limits import betas_range_record, pose_range_record
+        from ..datagen.factory import load_config, train_betas, train_poses
         from .physics_train import PHYSICS_FIT, physics_set
 
         if detail is not None and detail.info["data"].get("kind") not in planned:
@@ -196,10 +196,12 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
                            max_frames=parity_frames, mocap_dir=mocap_dir)
         data_sha256, fit_npz = data.config_sha256, coarse.path / PHYSICS_FIT
         # the joint angles the runs saw, which a bake of a learned tier checks a shot against
-        poses = pose_range_record(train_poses(load_config(data_dir, mocap_dir=mocap_dir), body))
+        factory = load_config(data_dir, mocap_dir=mocap_dir)
+        poses = pose_range_record(train_poses(factory, body))
+        bodies = betas_range_record(train_betas(factory))
     else:  # a simulated data set records no poses here: the bake checks against JOINT_LIMITS
         data = load_dataset(data_dir, (Split.VAL,), body=body, max_frames=parity_frames)
-        body, data_sha256, fit_npz, poses = data.body, data.manifest_sha256, data_dir / FIT, None
+        body, data_sha256, fit_npz, poses, bodies = data.body, data.manifest_sha256, data_dir / FIT, None, None
     for run in (coarse, detail):
         if run is not None and run.info["data"]["manifest_sha256"] != data_sha256:
             raise ArgumentError(f"{run.path}: trained on another data set than {data_dir} (sha256 "
@@ -252,7 +254,7 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         if simulated:  # hybrid runs: the simulated data of their supervised term, per tier
             training["sim_manifest_sha256"] = simulated
         if poses is not None:
-            training["poses"] = poses
+            training["poses"], training["bodies"] = poses, bodies
         out = write_bundle(out_dir, name=name, category=category, coarse_onnx=coarse_path,
                            detail_onnx=detail_path, fit_npz=fit_npz, configs=configs,
                            training_data=training, metrics=summary, opset=OPSET, force=force,

@@ -6,7 +6,8 @@ A bundle is a folder::
                              models {tier: {file, inputs, outputs, config}; coarse also
                              base: body | skinned}, fit {file, ...},
                              training_data {manifest_sha256, description, and optionally
-                             poses: the joint angle range trained on}, metrics {...}
+                             poses and bodies: the joint angles and shapes trained on},
+                             metrics {...}
     <bundle>/coarse.onnx     the coarse generator (inputs: runtime.io.COARSE_INPUTS)
     <bundle>/detail.onnx     the detail generator with its parser (optional)
     <bundle>/fit.npz         the fit attribute's factor-analysis model (FitModel.save)
@@ -32,7 +33,7 @@ import numpy as np
 from ..core.files import file_sha256, models_dir
 from ..core.fit import FitModel
 from ..core.heading import Heading
-from ..core.limits import pose_range_from_record
+from ..core.limits import betas_range_from_record, pose_range_from_record
 from ..core.pipeline import CoarseBase, CoarseFeatures, CoarseForm
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError, BundleError, ClothUsdError
@@ -85,6 +86,10 @@ class ModelBundle:
     ``training_data.poses``, :func:`~cloth_usd.core.limits.pose_range_record`); None for a
     bundle that records none (then :data:`~cloth_usd.core.limits.JOINT_LIMITS`, the range of
     the procedural training motions, stands in)."""
+    betas_limits: np.ndarray | None = None
+    """(B, 2) the range of shape coefficients of the bodies the models were trained on (the
+    manifest's ``training_data.bodies``, :func:`~cloth_usd.core.limits.betas_range_record`);
+    None for a bundle that records none (then ``|beta| <= BETA_LIMIT`` stands in)."""
     _sessions: dict = field(default_factory=dict, repr=False)
 
     def model_path(self, tier: Tier) -> Path:
@@ -180,12 +185,17 @@ def load_bundle(path: str | Path) -> ModelBundle:
         raise BundleError(f"{mpath}: models.coarse.features {features!r} is not one of "
                           f"{', '.join(f.value for f in CoarseFeatures)} (a newer bundle? update cloth-usd)")
     training = manifest.get("training_data")
-    pose_limits = None
+    pose_limits = betas_limits = None
     if isinstance(training, dict) and "poses" in training:
         try:
             pose_limits = pose_range_from_record(training["poses"])
         except ValueError as exc:
             raise BundleError(f"{mpath}: training_data.poses: {exc}") from None
+    if isinstance(training, dict) and "bodies" in training:
+        try:
+            betas_limits = betas_range_from_record(training["bodies"])
+        except ValueError as exc:
+            raise BundleError(f"{mpath}: training_data.bodies: {exc}") from None
     fit_file = _field(manifest, "fit", dict, mpath).get("file")
     if fit_file not in files:
         raise BundleError(f"{mpath}: fit.file must name a file listed in 'files'")
@@ -206,7 +216,8 @@ def load_bundle(path: str | Path) -> ModelBundle:
         raise BundleError(f"{folder}: bundle file {fit_file} is not a fit model ({exc})") from exc
     return ModelBundle(path=folder, name=name, category=category, tiers=tiers,
                        sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit,
-                       form=CoarseForm(base, heading, features), pose_limits=pose_limits)
+                       form=CoarseForm(base, heading, features), pose_limits=pose_limits,
+                       betas_limits=betas_limits)
 
 
 #: In a folder of bundles: ``{"<category>": "<bundle folder>"}``, the bundle tried first for a
@@ -296,8 +307,9 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         coarse_onnx, detail_onnx: exported generators (detail optional).
         fit_npz: a :meth:`FitModel.save` file.
         configs: ``{"coarse": {...}, "detail": {...}}`` the models' configs (JSON-able).
-        training_data: ``{"manifest_sha256": ..., "description": ...}``, and ``"poses"``: the
-            training poses' :func:`~cloth_usd.core.limits.pose_range_record`, checked here.
+        training_data: ``{"manifest_sha256": ..., "description": ...}``, and ``"poses"`` and
+            ``"bodies"``: the training poses' :func:`~cloth_usd.core.limits.pose_range_record`
+            and bodies' :func:`~cloth_usd.core.limits.betas_range_record`, checked here.
         metrics: validation metrics (JSON-able), e.g. mean vertex error [mm].
         opset: the ONNX opset of the exported files.
         form: how the models were trained (base, heading, coarse features), recorded in
@@ -319,11 +331,12 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
             raise ArgumentError(f"{src}: {tier.value} model file not found")
     if not Path(fit_npz).is_file():
         raise ArgumentError(f"{fit_npz}: fit model file not found")
-    if "poses" in training_data:
-        try:
-            pose_range_from_record(training_data["poses"])
-        except ValueError as exc:
-            raise ArgumentError(f"training_data.poses: {exc}") from None
+    for key, check in (("poses", pose_range_from_record), ("bodies", betas_range_from_record)):
+        if key in training_data:
+            try:
+                check(training_data[key])
+            except ValueError as exc:
+                raise ArgumentError(f"training_data.{key}: {exc}") from None
     fit = FitModel.load(fit_npz)
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, str] = {}

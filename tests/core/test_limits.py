@@ -57,3 +57,17 @@ def test_the_check_takes_the_range_it_is_given():
     assert pose_outliers(shot, limits=pose_range(_poses([-25.0, 25.0]))) is None  # within 10 deg of the range
     narrow = pose_outliers(shot, limits=pose_range(_poses([0.0, 10.0])))
     assert narrow is not None and (narrow.low_deg, narrow.high_deg) == pytest.approx((0.0, 10.0))
+
+
+def test_the_bodies_record_round_trips_and_the_check_allows_the_margin():
+    from cloth_usd.core.limits import BETA_MARGIN, betas_outside_range, betas_range_from_record, betas_range_record
+
+    trained = np.array([[-2.0, 2.0, 0.0], [2.0, -2.0, 0.0], [1.0, 1.0, 0.0]])
+    record = betas_range_record(trained)
+    assert record == {"count": 3, "betas": [[-2.0, 2.0], [-2.0, 2.0], [0.0, 0.0]]}
+    lim = betas_range_from_record(record)
+    assert betas_outside_range(np.array([2.0 + BETA_MARGIN, -2.0, 0.4]), lim).size == 0  # at the margin: inside
+    assert betas_outside_range(np.array([3.0, 3.0, 0.0, 0.0, 0.6]), lim).tolist() == [0, 1, 4]  # past the record: 0
+    for bad in ([], {"betas": [[0.0]]}, {"betas": [[1.0, 0.0]]}, {"betas": [[0.0, float("inf")]]}):
+        with pytest.raises(ValueError, match="expected"):
+            betas_range_from_record(bad)

@@ -45,6 +45,14 @@ def test_train_poses_are_each_training_motion_once_and_make_no_garment(monkeypat
         factory.train_poses(FactoryConfig(**{**TINY, "train_motions": []}))
 
 
+def test_train_betas_are_the_training_bodies():
+    from cloth_usd.datagen.bodies import body_shapes
+    from cloth_usd.datagen.factory import train_betas
+
+    betas = train_betas(FactoryConfig(**TINY))  # medium_regular is the test body
+    np.testing.assert_array_equal(betas, np.stack([s.betas for s in body_shapes(["short_thin", "tall_fat"])]))
+
+
 def test_config_errors_name_the_file_and_key(tmp_path):
     bad = tmp_path / "bad.json"
     bad.write_text(json.dumps({"shirtz": 3}))

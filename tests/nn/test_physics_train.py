@@ -98,6 +98,11 @@ def test_a_physics_run_loads_and_exports_a_bundle_that_bakes(config_path, tmp_pa
     poses = train_poses(load_config(config_path))
     assert bundle.manifest["training_data"]["poses"]["frames"] == len(poses)
     np.testing.assert_allclose(bundle.pose_limits, pose_range(poses), atol=np.deg2rad(0.006))
+    from cloth_usd.datagen.factory import train_betas
+
+    betas = train_betas(load_config(config_path))  # and the bodies it was trained on
+    assert bundle.manifest["training_data"]["bodies"]["count"] == len(betas)
+    np.testing.assert_allclose(bundle.betas_limits, np.stack([betas.min(0), betas.max(0)], axis=1))
     with pytest.raises(ArgumentError, match="a run exists there"):
         train_physics(config_path, tmp_path / "run", PHYSICS, device="cpu")
 

@@ -121,6 +121,8 @@ def test_missing_file(tmp_path, fake_exported):
      "models.coarse.features 'cloth' is not one of body, contact"),
     (lambda m: m["training_data"].update(poses={"frames": 3, "euler_deg": {"pelvis": [[0, 1]] * 3}}),
      "training_data.poses: euler_deg lacks the joints left_hip"),
+    (lambda m: m["training_data"].update(bodies={"count": 1, "betas": [[1.0, -1.0]]}),
+     r"training_data.bodies: expected .*low <= high"),
 ])
 def test_bad_manifest(tmp_path, fake_exported, edit, expect):
     folder = write_tiny_bundle(tmp_path / "b", fake_exported)
@@ -132,6 +134,7 @@ def test_bad_manifest(tmp_path, fake_exported, edit, expect):
 
 
 def test_the_training_poses_a_bundle_records_are_its_pose_limits(tmp_path, fake_exported):
+    """(And the shipped T-shirt bundle records its training bodies: betas within +-2.)"""
     from cloth_usd.core.limits import pose_range, pose_range_record
     from cloth_usd.datagen import walk_cycle
     from cloth_usd.runtime.bundle import write_bundle
@@ -142,6 +145,7 @@ def test_the_training_poses_a_bundle_records_are_its_pose_limits(tmp_path, fake_
                           fit_npz=fit, configs=configs, training_data={"poses": pose_range_record(poses)},
                           metrics={}, opset=18)
     np.testing.assert_allclose(load_bundle(folder).pose_limits, pose_range(poses), atol=np.deg2rad(0.006))
+    assert load_bundle(folder).betas_limits is None  # no bodies recorded
     assert load_bundle(write_tiny_bundle(tmp_path / "b", fake_exported)).pose_limits is None  # none recorded
     bad = pose_range_record(poses)
     bad["euler_deg"]["left_elbow"][1] = [10.0, -10.0]  # low above high
@@ -149,6 +153,8 @@ def test_the_training_poses_a_bundle_records_are_its_pose_limits(tmp_path, fake_
         write_bundle(tmp_path / "q", name="q", category="tshirt", coarse_onnx=coarse, detail_onnx=det,
                      fit_npz=fit, configs=configs, training_data={"poses": bad}, metrics={}, opset=18)
     assert not (tmp_path / "q").exists()
+    shipped = find_bundle("tshirt")
+    np.testing.assert_array_equal(shipped.betas_limits[:3], [[-2.0, 2.0], [-2.0, 2.0], [0.0, 0.0]])
 
 
 def test_make_bundle_script(tmp_path, fake_exported, capsys):
