@@ -9,6 +9,7 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
+from ..core.association import surface_at
 from ..core.body import BodyModel, shape_body
 from ..core.features import vertex_normals
 from ..core.fit import FIT_LIMIT
@@ -100,10 +101,7 @@ def inside_at_rest(binding: SkinBinding, body: BodyModel, betas: np.ndarray) -> 
             that shaped, unposed body).
     """
     v_shaped, _ = shape_body(body, betas)
-    a = binding.association
-    corners = body.faces[a.triangle]  # (N, 3)
-    closest = np.einsum("nk,nkc->nc", a.barycentric, v_shaped[corners])
-    normal = np.einsum("nk,nkc->nc", a.barycentric, vertex_normals(v_shaped, body.faces)[corners])
+    closest, normal = surface_at(binding.association, v_shaped, vertex_normals(v_shaped, body.faces), body.faces)
     return np.maximum(-np.einsum("nc,nc->n", binding.rest_points - closest, normal), 0.0)
 
 
@@ -149,7 +147,7 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
                         f"average at rest (a worn garment is within {FAR_FROM_BODY:g} m); check its "
                         "cloth:body and rest points")
     measured = None if learned is None else learned.pair.alpha_measured
-    if measured is not None and np.any(np.abs(measured) > FIT_LIMIT):
+    if measured is not None and np.any(np.abs(measured) > FIT_LIMIT):  # None: the skinning tier
         listed = ", ".join(f"{a:.3g}" for a in measured)
         warnings.append(f"{where}: its fit on the body <{char.prim_path}> (fit attribute {listed}) lies past "
                         f"+-{FIT_LIMIT:g} on a factor, beyond the garments bundle '{bundle.name}' was trained on; the "

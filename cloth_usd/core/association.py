@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["Association", "associate", "closest_point_on_triangles", "incident_faces"]
+__all__ = ["Association", "associate", "closest_point_on_triangles", "incident_faces", "surface_at"]
 
 
 @dataclass(frozen=True)
@@ -116,6 +116,24 @@ def incident_faces(faces: np.ndarray, num_vertices: int) -> np.ndarray:
     table = np.full((num_vertices, max(int(counts.max()), 1)), -1, dtype=np.int64)
     table[flat_v, slot] = flat_f
     return table
+
+
+def surface_at(association: Association, body_vertices: np.ndarray, body_normals: np.ndarray,
+               body_faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each associated point's nearest body surface point and the vertex normal interpolated
+    there (not renormalised), from the association's triangles and barycentric coordinates.
+
+    Args:
+        association: of N points against the body (:func:`associate`).
+        body_vertices: (V, 3) that body [m]; body_normals: (V, 3) its vertex normals;
+        body_faces: (F, 3) int its triangles.
+    Returns:
+        ``(closest (N, 3) [m], normal (N, 3))``.
+    """
+    corners = np.asarray(body_faces)[association.triangle]  # (N, 3)
+    b = association.barycentric
+    return (np.einsum("nk,nkc->nc", b, np.asarray(body_vertices)[corners]),
+            np.einsum("nk,nkc->nc", b, np.asarray(body_normals)[corners]))
 
 
 def associate(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray,

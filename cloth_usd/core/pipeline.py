@@ -121,10 +121,10 @@ class GarmentPair:
     alpha: np.ndarray
     """(F,) float64 the pair's fit attribute, as the models read it (clamped to
     :data:`~cloth_usd.core.fit.FIT_LIMIT`)."""
+    alpha_measured: np.ndarray
+    """(F,) float64 the fit attribute as measured, before the clamp."""
     patch: BodyPatch
     """The body vertices the garment's features and post-process read."""
-    alpha_measured: np.ndarray | None = None
-    """(F,) float64 the fit attribute before the clamp (None: not measured apart)."""
 
     @property
     def assoc_vertex(self) -> np.ndarray:
@@ -278,7 +278,7 @@ def prepare_pair(body: BodyModel, betas: np.ndarray, rest_points: np.ndarray, fa
                        np.union1d(body_under(v_shaped, rest_points, arms_down=_arms_down(body, v_shaped, joints)),
                                   swinging_parts(body)))
     return GarmentPair(betas=betas, faces=faces, binding=binding, v_shaped=v_shaped, joints=joints,
-                       graph=graph, alpha=alpha, patch=patch, alpha_measured=measured)
+                       graph=graph, alpha=alpha, alpha_measured=measured, patch=patch)
 
 
 def pose_body(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray) -> PosedBody:

@@ -29,7 +29,7 @@ from enum import Enum
 
 import numpy as np
 
-from ..core.association import associate
+from ..core.association import associate, surface_at
 from ..core.body import BodyModel, posed_vertices, shape_body
 from ..errors import ClothUsdError
 
@@ -371,10 +371,8 @@ def body_side(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndar
         points: (N, 3) garment vertices [m]; body_vertices: (V, 3) posed body [m];
         body_faces: (F, 3) body triangles.
     """
-    a = associate(points, body_vertices, body_faces)
-    corners = body_faces[a.triangle]
-    closest = np.einsum("nk,nkc->nc", a.barycentric, body_vertices[corners])
-    normal = np.einsum("nk,nkc->nc", a.barycentric, _vertex_normals(body_vertices, body_faces)[corners])
+    closest, normal = surface_at(associate(points, body_vertices, body_faces), body_vertices,
+                                 _vertex_normals(body_vertices, body_faces), body_faces)
     return np.einsum("nc,nc->n", points - closest, normal)
 
 

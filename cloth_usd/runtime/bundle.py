@@ -121,6 +121,24 @@ class ModelBundle:
         return self._sessions[tier]
 
 
+#: The ranges a bundle may record of what it was trained on (``training_data.<key>``), and
+#: how each is read.
+_RECORDS = {"poses": pose_range_from_record, "bodies": betas_range_from_record}
+
+
+def _training_records(training: Any) -> dict[str, np.ndarray]:
+    """The ranges ``training_data`` records, read (:data:`_RECORDS`); raises ValueError naming
+    the one that is broken."""
+    found = {}
+    for key, read in _RECORDS.items():
+        if isinstance(training, Mapping) and key in training:
+            try:
+                found[key] = read(training[key])
+            except ValueError as exc:
+                raise ValueError(f"training_data.{key}: {exc}") from None
+    return found
+
+
 def _field(manifest: Mapping[str, Any], key: str, kind: type, where: Path) -> Any:
     if key not in manifest or not isinstance(manifest[key], kind):
         raise BundleError(f"{where}: manifest field '{key}' is missing or not a {kind.__name__}")
@@ -184,18 +202,10 @@ def load_bundle(path: str | Path) -> ModelBundle:
     if features not in {f.value for f in CoarseFeatures}:
         raise BundleError(f"{mpath}: models.coarse.features {features!r} is not one of "
                           f"{', '.join(f.value for f in CoarseFeatures)} (a newer bundle? update cloth-usd)")
-    training = manifest.get("training_data")
-    pose_limits = betas_limits = None
-    if isinstance(training, dict) and "poses" in training:
-        try:
-            pose_limits = pose_range_from_record(training["poses"])
-        except ValueError as exc:
-            raise BundleError(f"{mpath}: training_data.poses: {exc}") from None
-    if isinstance(training, dict) and "bodies" in training:
-        try:
-            betas_limits = betas_range_from_record(training["bodies"])
-        except ValueError as exc:
-            raise BundleError(f"{mpath}: training_data.bodies: {exc}") from None
+    try:
+        records = _training_records(manifest.get("training_data"))
+    except ValueError as exc:
+        raise BundleError(f"{mpath}: {exc}") from None
     fit_file = _field(manifest, "fit", dict, mpath).get("file")
     if fit_file not in files:
         raise BundleError(f"{mpath}: fit.file must name a file listed in 'files'")
@@ -216,8 +226,8 @@ def load_bundle(path: str | Path) -> ModelBundle:
         raise BundleError(f"{folder}: bundle file {fit_file} is not a fit model ({exc})") from exc
     return ModelBundle(path=folder, name=name, category=category, tiers=tiers,
                        sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit,
-                       form=CoarseForm(base, heading, features), pose_limits=pose_limits,
-                       betas_limits=betas_limits)
+                       form=CoarseForm(base, heading, features), pose_limits=records.get("poses"),
+                       betas_limits=records.get("bodies"))
 
 
 #: In a folder of bundles: ``{"<category>": "<bundle folder>"}``, the bundle tried first for a
@@ -331,12 +341,10 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
             raise ArgumentError(f"{src}: {tier.value} model file not found")
     if not Path(fit_npz).is_file():
         raise ArgumentError(f"{fit_npz}: fit model file not found")
-    for key, check in (("poses", pose_range_from_record), ("bodies", betas_range_from_record)):
-        if key in training_data:
-            try:
-                check(training_data[key])
-            except ValueError as exc:
-                raise ArgumentError(f"training_data.{key}: {exc}") from None
+    try:
+        _training_records(training_data)
+    except ValueError as exc:
+        raise ArgumentError(str(exc)) from None
     fit = FitModel.load(fit_npz)
     out.mkdir(parents=True, exist_ok=True)
     files: dict[str, str] = {}
