@@ -184,6 +184,14 @@ def _motion(fields: dict, config: FactoryConfig, where: str, smpl_joints: np.nda
     return _Motion(name=name, poses=poses, transl=transl, fps=float(fps), warmup_frames=int(warmup), source=source)
 
 
+def _motions(config: FactoryConfig, key: str, body, *, check_speed: bool = True) -> list[_Motion]:
+    """The config's ``train_motions`` or ``test_motions`` (``key``), retargeted to the mean
+    body's skeleton; with ``check_speed``, a clip stretch whose body jumps is refused."""
+    mean_joints = shape_body(body, np.zeros(1))[1]
+    return [_motion(m, config, f"{key}[{i}]", mean_joints, body if check_speed else None)
+            for i, m in enumerate(getattr(config, key))]
+
+
 def _body_label(betas: np.ndarray) -> str:
     """thin / regular / fat from the girth component (beta 1), for evaluation rows."""
     return "thin" if betas[1] < -0.5 else "fat" if betas[1] > 0.5 else "regular"
@@ -229,9 +237,7 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     body_shapes([b for b in config.test_bodies if b != OWN_BODY])  # validates the names
     train_shirts = [i for i in range(len(variants)) if i not in config.test_shirts]
     train_bodies = [n for n in config.bodies if n not in config.test_bodies]
-    mean_joints = shape_body(body, np.zeros(1))[1]
-    train_m = [_motion(m, config, f"train_motions[{i}]", mean_joints, body) for i, m in enumerate(config.train_motions)]
-    test_m = [_motion(m, config, f"test_motions[{i}]", mean_joints, body) for i, m in enumerate(config.test_motions)]
+    train_m, test_m = _motions(config, "train_motions", body), _motions(config, "test_motions", body)
     sim_fps = float(config.sim.get("fps", SimConfig.fps))
     for kind, motions in (("train_motions", train_m), ("test_motions", test_m)):
         for i, m in enumerate(motions):
@@ -277,9 +283,7 @@ def train_poses(config: FactoryConfig, body=None) -> np.ndarray:
     (every training garment and body wears the same ones): what a bundle trained on the config
     records as its pose range (:func:`~cloth_usd.core.limits.pose_range_record`). No garment is
     made."""
-    body = body if body is not None else load_body_model()
-    mean_joints = shape_body(body, np.zeros(1))[1]
-    motions = [_motion(m, config, f"train_motions[{i}]", mean_joints) for i, m in enumerate(config.train_motions)]
+    motions = _motions(config, "train_motions", body if body is not None else load_body_model(), check_speed=False)
     if not motions:
         raise ArgumentError("train_motions: the config lists no training motion")
     return np.concatenate([m.poses for m in motions])
