@@ -25,7 +25,7 @@ class CLOTH_USD_OT_use_last_import(Operator):
 
 
 class CLOTH_USD_OT_inspect(Operator):
-    """List the shot's characters, garments and contract problems"""
+    """List the shot's characters, garments, warnings and contract problems"""
 
     bl_idname = "cloth_usd.inspect"
     bl_label = "Inspect"
@@ -38,7 +38,8 @@ class CLOTH_USD_OT_inspect(Operator):
     def execute(self, context):
         settings = context.scene.cloth_usd
         try:
-            report = cloth_usd.inspect_stage(scene_io.abspath(settings.shot_path))
+            report = cloth_usd.inspect_stage(scene_io.abspath(settings.shot_path),
+                                             body_model=scene_io.body_model(context))
         except ClothUsdError as exc:
             self.report({'ERROR'}, str(exc))
             return {'CANCELLED'}
@@ -52,9 +53,9 @@ class CLOTH_USD_OT_inspect(Operator):
         else:
             settings.frame_start, settings.frame_end = context.scene.frame_start, context.scene.frame_end
         scene = report.scene
-        self.report({'WARNING'} if report.problems else {'INFO'},
+        self.report({'WARNING'} if report.problems or report.warnings else {'INFO'},
                     f"{len(scene.characters)} character(s), {len(scene.garments)} garment(s), "
-                    f"{len(report.problems)} problem(s)")
+                    f"{len(report.warnings)} warning(s), {len(report.problems)} problem(s)")
         return {'FINISHED'}
 
 
@@ -127,6 +128,7 @@ def summary_lines(report) -> list[tuple[str, str]]:
         state = "" if g.enabled else ", disabled"
         lines.append(("GARMENT", f"{g.prim_path}: {g.category.value}, {g.rest_points.shape[0]} "
                                  f"vertices, tier {tier}{state}"))
+    lines += [("WARNING", warning) for warning in report.warnings]
     lines += [("PROBLEM", problem) for problem in report.problems]
     return lines
 

@@ -41,6 +41,7 @@ def _parser() -> argparse.ArgumentParser:
     i = add_command("inspect", help="list characters, garments, frame range, units and problems")
     i.add_argument("scene", help="USD stage to read")
     i.add_argument("--joint-map", metavar="FILE", help=_JOINT_MAP_HELP)
+    i.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder the bake will use (default: embedded)")
 
     b = add_command("bake", help="write a garment point-cache layer")
     b.add_argument("scene", help="USD stage to read (never modified)")
@@ -266,7 +267,7 @@ def _datagen(args: argparse.Namespace) -> int:
 def _inspect(args: argparse.Namespace) -> int:
     from .inspection import format_report, inspect_stage
 
-    report = inspect_stage(args.scene, joint_map=args.joint_map)
+    report = inspect_stage(args.scene, joint_map=args.joint_map, body_model=args.body_model)
     sys.stdout.write(format_report(report) + "\n")
     return 1 if report.problems else 0
 

@@ -1,4 +1,5 @@
-"""What ``cloth-usd inspect`` reports about a stage: characters, garments, range, units, problems."""
+"""What ``cloth-usd inspect`` reports about a stage: characters, garments, range, units, problems,
+and garments that do not look worn by their body."""
 
 from __future__ import annotations
 
@@ -7,8 +8,10 @@ from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
 
+from .core.body import BodyModel
 from .core.joint_names import JointMap
 from .core.scene import Scene
+from .errors import BodyModelError
 
 __all__ = ["InspectReport", "inspect_stage", "format_report"]
 
@@ -24,24 +27,30 @@ class InspectReport:
     """One line each: Skeletons no garment targets that are not SMPL skeletons, why and what to do."""
     warnings: tuple[str, ...] = field(default=())
     """One line each: garments that read but do not look worn by their body (implausible
-    size, far from its bones; :func:`cloth_usd.core.plausibility.scale_notes`)."""
+    size, far from its bones, :func:`cloth_usd.core.plausibility.scale_notes`; inside its
+    shaped body or far from its surface at rest, :func:`cloth_usd.core.plausibility.body_notes`,
+    the lines the bake warns with)."""
 
 
 def inspect_stage(path: str | Path, *,
-                  joint_map: JointMap | Mapping[str, str] | str | PathLike | None = None) -> InspectReport:
+                  joint_map: JointMap | Mapping[str, str] | str | PathLike | None = None,
+                  body_model: str | PathLike | None = None) -> InspectReport:
     """Read a stage leniently: every contract violation becomes a problem line.
 
     Args:
         joint_map: ``{their joint name: SMPL joint name}`` or a JSON / TOML file of it
             (see :func:`cloth_usd.usd.read.read_scene`).
+        body_model: the SMPL-format body model a bake would use (a file or folder; None for
+            the embedded one): each garment is measured against its character's body shaped by
+            its betas, and a body model that cannot serve a character is a problem, as in a bake.
     """
     from .usd.read import open_stage, read_scene
 
     problems: list[str] = []
     skipped: list[str] = []
     scene = read_scene(open_stage(path), problems=problems, skipped=skipped, joint_map=joint_map)
-    return InspectReport(scene=scene, problems=tuple(problems), skipped=tuple(skipped),
-                         warnings=tuple(_scale_warnings(scene)))
+    warnings = _scale_warnings(scene) + _body_warnings(scene, body_model, problems)
+    return InspectReport(scene=scene, problems=tuple(problems), skipped=tuple(skipped), warnings=tuple(warnings))
 
 
 def _scale_warnings(scene: Scene) -> list[str]:
@@ -56,6 +65,45 @@ def _scale_warnings(scene: Scene) -> list[str]:
             continue
         for note in scale_notes(garment_scale(g.rest_points, char.rest_joints)):
             lines.append(f"{g.prim_path}: {note}")
+    return lines
+
+
+def _body_warnings(scene: Scene, body_model: str | PathLike | None, problems: list[str]) -> list[str]:
+    """A line for each garment inside its shaped body or far from it at rest; a body model
+    that cannot be loaded for a character, or lacks its shape components, adds a problem."""
+    from .baking.plan import check_shape_components
+    from .core.body import load_body_model, shape_body
+    from .core.frames import canonical_rest_points, rest_orientation
+    from .core.plausibility import body_notes
+    from .core.skinning import bind_worn
+
+    characters = {c.prim_path: c for c in scene.characters}
+    bodies: dict[str, BodyModel | BodyModelError] = {}
+    lines = []
+    for g in scene.garments:
+        char = characters.get(g.body_path)
+        if char is None:
+            continue
+        if char.gender not in bodies:
+            try:
+                bodies[char.gender] = load_body_model(body_model, gender=char.gender)
+            except BodyModelError as e:
+                bodies[char.gender] = e
+                problems.append(f"<{char.prim_path}>: {e}")
+        body = bodies[char.gender]
+        if isinstance(body, BodyModelError):
+            continue
+        try:
+            check_shape_components(char, body, scene.stage.identifier)
+        except BodyModelError as e:
+            if str(e) not in problems:
+                problems.append(str(e))
+            continue
+        joints = shape_body(body, char.betas)[1]
+        rest = canonical_rest_points(g.rest_points, char.rest_root_position,
+                                     rest_orientation(char.rest_joints, joints), joints)
+        binding = bind_worn(body, char.betas, rest, g.triangles, g.category)
+        lines += [f"{g.prim_path}: {note}" for note in body_notes(binding, body, char.betas, char.prim_path)]
     return lines
 
 

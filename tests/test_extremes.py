@@ -24,6 +24,7 @@ from cloth_usd.core.limits import JOINT_LIMITS, betas_range_record, pose_outlier
 from cloth_usd.datagen import walk_cycle
 from cloth_usd.datagen.motion import JOINT_LIMITS as DATAGEN_LIMITS
 from cloth_usd.datagen.motion import euler_to_poses
+from cloth_usd.inspection import inspect_stage
 from cloth_usd.usd.author import author_garment, author_skeleton, set_stage_metadata
 
 from test_batch import tube
@@ -226,7 +227,8 @@ def test_betas_at_plus_minus_5_warn_and_stay_finite(body, tmp_path, caplog):
 def test_a_garment_inside_its_body_at_rest_is_warned_about(body, tmp_path, caplog):
     """A shirt made for one body and worn by a larger one (the sample's shirt imported onto a
     body of betas 3, 3: 94% of its vertices inside, up to 76 mm) baked with no sign of it:
-    every tier starts from a garment in the body."""
+    every tier starts from a garment in the body. ``inspect`` says so before the bake, in
+    the bake's words; a body model it cannot load is a problem there, as in a bake."""
     def narrow(joints):  # the tube at half its width and depth: in the torso
         points, faces = tube(joints)
         centre = np.array([joints[0, 0], 0.0, joints[0, 2]])
@@ -238,6 +240,12 @@ def test_a_garment_inside_its_body_at_rest_is_warned_about(body, tmp_path, caplo
     (message,) = [m for m in _warnings(caplog) if "inside the body" in m]
     assert f"<{PRIM}>: " in message and "lie more than 2 mm inside the body </Char/Skel> at rest" in message
     assert message in result.garments[0].warnings
+    report = inspect_stage(scene)
+    assert report.warnings == (f"{PRIM}: {message.split(f'<{PRIM}>: ')[1]}",) and not report.problems
+    assert not inspect_stage(write_stage(tmp_path / "worn.usda", body)).warnings
+    missing = inspect_stage(scene, body_model=tmp_path / "none.npz")
+    assert not missing.warnings and missing.problems == (f"</Char/Skel>: {tmp_path / 'none.npz'}: body model "
+                                                         "file not found",)
 
 
 def test_a_body_past_the_bodies_a_bundle_was_trained_on_is_warned_about(body, tmp_path, caplog):

@@ -27,7 +27,8 @@ def test_inspect_warns_and_bake_refuses_a_ten_times_garment(tmp_path, capsys):
     scene = _scaled(tmp_path, 10.0)
     assert main(["inspect", str(scene)]) == 0  # a warning, not a contract violation
     out = capsys.readouterr().out
-    assert "warnings    2" in out and "times the body's height" in out and "/Character/Tshirt" in out
+    assert "warnings    3" in out and "times the body's height" in out and "/Character/Tshirt" in out
+    assert "from the body </Character/Skeleton> on average at rest" in out  # as the bake says it
     cache = tmp_path / "cache.usdc"
     assert main(["bake", str(scene), "-o", str(cache), "--frames", "1001:1002"]) == 2
     err = capsys.readouterr().err.strip()

@@ -11,9 +11,10 @@
 """
 
 from ..core.frame_range import FrameRange, parse_frames
+from ..core.plausibility import FAR_FROM_BODY
 from ..core.provenance import GarmentReport
 from .cache import ModelCache
-from .garment import FAR_FROM_BODY, LEARNED_BATCH_VERTICES
+from .garment import LEARNED_BATCH_VERTICES
 from .plan import BakePlan, bake_plan, parse_tier
 from .run import BakeResult, bake
 from .size import MAX_CACHE_BYTES, cache_bytes

@@ -9,14 +9,13 @@ from typing import Any, Callable, Sequence
 import numpy as np
 from tqdm.auto import tqdm
 
-from ..core.association import surface_at
-from ..core.body import BodyModel, shape_body
-from ..core.features import vertex_normals
+from ..core.body import BodyModel
 from ..core.fit import FIT_LIMIT
 from ..core.frames import CanonicalMotion
 from ..core.graph import directed_edges
 from ..core.guard import GuardLimits, check_frames
 from ..core.limits import BETA_LIMIT, BETA_MARGIN, betas_outside, betas_outside_range, pose_outliers
+from ..core.plausibility import body_notes
 from ..core.provenance import GarmentReport
 from ..core.scene import Character, Garment, Tier
 from ..core.skinning import SkinBinding, bind_worn, skin_garment
@@ -25,21 +24,10 @@ from ..runtime.bundle import ModelBundle
 from ..runtime.garment import LearnedGarment
 from .cache import ModelCache, garment_key
 
-__all__ = ["FAR_FROM_BODY", "INSIDE_AT_REST", "INSIDE_DEPTH", "LEARNED_BATCH_VERTICES", "inside_at_rest",
-           "range_notes", "bake_garment"]
+__all__ = ["LEARNED_BATCH_VERTICES", "range_notes", "bake_garment"]
 
 log = logging.getLogger(__name__)
 
-#: A garment whose rest vertices lie further than this from the body surface on
-#: average [m] is warned about: its ``cloth:body`` may target the wrong character.
-FAR_FROM_BODY = 0.10
-#: A garment with more than this share of its rest vertices deeper than :data:`INSIDE_DEPTH`
-#: in its body, in the rest pose, is warned about: it was made for a smaller body (other
-#: betas) or sits in it, and every tier starts from it there.
-INSIDE_AT_REST = 0.05
-#: How deep [m] a rest vertex must lie in the body to count for :data:`INSIDE_AT_REST` (a
-#: tight garment touches the body; 2 mm in is a garment in the body).
-INSIDE_DEPTH = 0.002
 #: Garment vertices per learned-model call when ``bake(batch_size=None)``: the model's
 #: activations grow with frames x vertices (about 100 MiB per 4000-vertex frame at width 0.125).
 LEARNED_BATCH_VERTICES = 16_000
@@ -91,20 +79,6 @@ def range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray,
     return notes
 
 
-def inside_at_rest(binding: SkinBinding, body: BodyModel, betas: np.ndarray) -> np.ndarray:
-    """(N,) each rest garment vertex's depth inside its body in the rest pose [m] (0 outside):
-    its signed distance, along the body normal interpolated at its nearest surface point (the
-    binding's association), negated where negative.
-
-    Args:
-        binding: the garment bound to the body of shape ``betas`` (its association is against
-            that shaped, unposed body).
-    """
-    v_shaped, _ = shape_body(body, betas)
-    closest, normal = surface_at(binding.association, v_shaped, vertex_normals(v_shaped, body.faces), body.faces)
-    return np.maximum(-np.einsum("nc,nc->n", binding.rest_points - closest, normal), 0.0)
-
-
 def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, motion: CanonicalMotion,
                  times: np.ndarray, tier: Tier, to_prim: np.ndarray, *, chunk: int, progress: bool,
                  bundle: ModelBundle | None = None, batch_size: int | None = None,
@@ -135,17 +109,7 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
 
     binding, learned = cache.garment(garment_key(garment, body, char.betas, rest, tier, bundle), prepare)
     warnings = [f"{where}: {note}" for note in notes]
-    depth = inside_at_rest(binding, body, char.betas)
-    inside = float(np.mean(depth > INSIDE_DEPTH))
-    if inside > INSIDE_AT_REST:
-        warnings.append(f"{where}: {inside:.0%} of the garment's vertices lie more than {INSIDE_DEPTH * 1e3:g} mm "
-                        f"inside the body <{char.prim_path}> at rest (up to {depth.max() * 1e3:.0f} mm): it was "
-                        "made for another body shape, or sits in the body; every tier starts from it there")
-    distance = float(binding.association.distance.mean())
-    if distance > FAR_FROM_BODY:
-        warnings.append(f"{where}: the garment lies {distance:.2f} m from the body <{char.prim_path}> on "
-                        f"average at rest (a worn garment is within {FAR_FROM_BODY:g} m); check its "
-                        "cloth:body and rest points")
+    warnings += [f"{where}: {note}" for note in body_notes(binding, body, char.betas, char.prim_path)]
     measured = None if learned is None else learned.pair.alpha_measured
     if measured is not None and np.any(np.abs(measured) > FIT_LIMIT):  # None: the skinning tier
         listed = ", ".join(f"{a:.3g}" for a in measured)
@@ -207,7 +171,7 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
              num_t, tier.value)
     return GarmentReport(prim_path=garment.prim_path, tier=tier,
                          vertices=int(binding.rest_points.shape[0]), frames=num_t,
-                         mean_body_distance_mm=distance * 1000.0,
+                         mean_body_distance_mm=float(binding.association.distance.mean()) * 1000.0,
                          bundle=None if learned is None else bundle.name,
                          fit=None if learned is None else tuple(float(a) for a in learned.alpha),
                          postprocess_moved=moved, max_displacement_mm=max_disp * 1000.0,

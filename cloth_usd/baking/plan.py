@@ -22,8 +22,8 @@ from ..usd.write import cache_layer_info
 from .cache import ModelCache
 from .digest import inputs_digest
 
-__all__ = ["parse_tier", "TierChoice", "ResolvedBake", "BakePlan", "open_scene", "resolve", "is_current",
-           "bake_plan"]
+__all__ = ["parse_tier", "TierChoice", "ResolvedBake", "BakePlan", "open_scene", "check_shape_components",
+           "resolve", "is_current", "bake_plan"]
 
 
 def parse_tier(value: str | Tier | None) -> Tier | None:
@@ -141,7 +141,7 @@ def _resolve_tier(garment: Garment, tier: Tier | None, source: str, *,
     return TierChoice(chosen, bundle)
 
 
-def _check_shape_components(char: Character, body: BodyModel, source: str) -> None:
+def check_shape_components(char: Character, body: BodyModel, source: str) -> None:
     """BodyModelError when the stage's betas use shape components the body model lacks."""
     extra = np.flatnonzero(char.betas[body.num_betas:]) + body.num_betas
     if extra.size:
@@ -181,7 +181,7 @@ def resolve(stage, protected: Sequence[str], *, frames: FrameRange | str | None,
         gender = characters[g.body_path].gender
         if gender not in bodies:
             bodies[gender] = cache.body(body_model, gender)
-        _check_shape_components(characters[g.body_path], bodies[gender], source)
+        check_shape_components(characters[g.body_path], bodies[gender], source)
     digest = inputs_digest(protected, frange, chosen, {p: (c.tier, c.bundle) for p, c in tiers.items()},
                            characters, bodies, dict(joint_map.entries) if joint_map is not None else {})
     return ResolvedBake(stage=stage, scene=scene, protected=tuple(protected), chosen=tuple(chosen), tiers=tiers,

@@ -1,10 +1,12 @@
 """Is a garment plausibly worn by its body? Its size against the body's height and its
-distance from the body's bones, from the rest skeleton alone (no body model needed).
+distance from the body's bones, from the rest skeleton alone (no body model needed); and,
+with the body model, how much of it lies inside the shaped body and how far it lies from
+the body's surface.
 
 A garment authored in the wrong units (a MakeHuman top left in decimetres is 10 times too
-big) or placed away from its character reads without a contract violation; these numbers
-let ``inspect`` warn about it and ``bake`` refuse it. Shape letters: N garment vertices,
-J joints.
+big), placed away from its character, or made for another body shape reads without a
+contract violation; these numbers let ``inspect`` and ``bake`` warn about it and ``bake``
+refuse a garment many times too big. Shape letters: N garment vertices, J joints.
 """
 
 from __future__ import annotations
@@ -13,10 +15,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .association import surface_at
+from .body import BodyModel, shape_body
+from .features import vertex_normals
+from .skinning import SkinBinding
 from .smpl import JOINT_NAMES, PARENTS
 
-__all__ = ["HEIGHT_PER_HEAD_ANKLE", "SIZE_WARN", "SIZE_SMALL", "SIZE_REFUSE", "FAR_FROM_BONES",
-           "GarmentScale", "garment_scale", "scale_notes"]
+__all__ = ["HEIGHT_PER_HEAD_ANKLE", "SIZE_WARN", "SIZE_SMALL", "SIZE_REFUSE", "FAR_FROM_BONES", "FAR_FROM_BODY",
+           "INSIDE_AT_REST", "INSIDE_DEPTH", "GarmentScale", "garment_scale", "scale_notes", "inside_at_rest",
+           "body_notes"]
 
 #: Body height [m] per head-joint-to-mid-ankle distance [m]: 1.69 m / 1.46 m for the
 #: embedded SMPL-format body at zero betas (the head joint sits below the crown, the ankles
@@ -32,6 +39,16 @@ SIZE_REFUSE = 3.0
 #: ``inspect`` warns when the garment's median vertex lies further than this from the body's
 #: bones [m]: a worn garment is within a torso's half depth plus its ease (about 0.15 m).
 FAR_FROM_BONES = 0.35
+#: A garment whose rest vertices lie further than this from the body surface on
+#: average [m] is warned about: its ``cloth:body`` may target the wrong character.
+FAR_FROM_BODY = 0.10
+#: A garment with more than this share of its rest vertices deeper than :data:`INSIDE_DEPTH`
+#: in its body, in the rest pose, is warned about: it was made for a smaller body (other
+#: betas) or sits in it, and every tier starts from it there.
+INSIDE_AT_REST = 0.05
+#: How deep [m] a rest vertex must lie in the body to count for :data:`INSIDE_AT_REST` (a
+#: tight garment touches the body; 2 mm in is a garment in the body).
+INSIDE_DEPTH = 0.002
 
 _HEAD = JOINT_NAMES.index("head")
 _ANKLES = [JOINT_NAMES.index("left_ankle"), JOINT_NAMES.index("right_ankle")]
@@ -99,4 +116,41 @@ def scale_notes(scale: GarmentScale) -> list[str]:
     if scale.distance > FAR_FROM_BONES:
         notes.append(f"its vertices lie {scale.distance:.2f} m from the body's bones (median; a worn garment is "
                      f"within {FAR_FROM_BONES:g} m): check its placement and cloth:body")
+    return notes
+
+
+def inside_at_rest(binding: SkinBinding, body: BodyModel, betas: np.ndarray) -> np.ndarray:
+    """(N,) each rest garment vertex's depth inside its body in the rest pose [m] (0 outside):
+    its signed distance, along the body normal interpolated at its nearest surface point (the
+    binding's association), negated where negative.
+
+    Args:
+        binding: the garment bound to the body of shape ``betas`` (its association is against
+            that shaped, unposed body).
+    """
+    v_shaped, _ = shape_body(body, betas)
+    closest, normal = surface_at(binding.association, v_shaped, vertex_normals(v_shaped, body.faces), body.faces)
+    return np.maximum(-np.einsum("nc,nc->n", binding.rest_points - closest, normal), 0.0)
+
+
+def body_notes(binding: SkinBinding, body: BodyModel, betas: np.ndarray, body_prim: str) -> list[str]:
+    """One line for each way the bound garment does not sit on its shaped body at rest: more
+    than :data:`INSIDE_AT_REST` of it deeper than :data:`INSIDE_DEPTH` inside, or further
+    than :data:`FAR_FROM_BODY` from it on average (empty when it sits on it).
+
+    Args:
+        binding: the garment bound to the body of shape ``betas``.
+        body_prim: the body's prim path, named in the lines.
+    """
+    notes = []
+    depth = inside_at_rest(binding, body, betas)
+    inside = float(np.mean(depth > INSIDE_DEPTH))
+    if inside > INSIDE_AT_REST:
+        notes.append(f"{inside:.0%} of the garment's vertices lie more than {INSIDE_DEPTH * 1e3:g} mm inside the body "
+                     f"<{body_prim}> at rest (up to {depth.max() * 1e3:.0f} mm): it was made for another body "
+                     "shape, or sits in the body; every tier starts from it there")
+    distance = float(binding.association.distance.mean())
+    if distance > FAR_FROM_BODY:
+        notes.append(f"the garment lies {distance:.2f} m from the body <{body_prim}> on average at rest (a worn "
+                     f"garment is within {FAR_FROM_BODY:g} m); check its cloth:body and rest points")
     return notes

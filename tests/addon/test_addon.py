@@ -185,17 +185,20 @@ def test_inspect_lists_characters_and_garments_and_the_panel_draws_them(blender,
     settings.frame_range = "CUSTOM"
     assert bpy.ops.cloth_usd.inspect() == {"FINISHED"}
     lines = [(i.kind, i.text) for i in settings.inspected]
-    assert lines == [
+    assert lines[:3] == [
         ("STAGE", "frames 1001-1024 at 24 fps, Z-up, 0.01 m/unit"),
         ("CHARACTER", "/Character/Skeleton (neutral)"),
         ("GARMENT", "/Character/Tube: tshirt, 192 vertices, tier from panel"),
     ]
+    # the tube's ellipse cuts into the body's flanks: what the bake will warn about, listed first
+    (warning,) = lines[3:]
+    assert warning[0] == "WARNING" and warning[1].startswith("/Character/Tube: ") and "inside the body" in warning[1]
     assert (settings.frame_start, settings.frame_end) == (1001, 1024)
 
     log: list = []
     bpy.types.CLOTH_USD_PT_bake.draw(SimpleNamespace(layout=FakeLayout(log)), bpy.context)
     labels = [text for kind, text in log if kind == "label"]
-    assert [text for _, text in lines] == labels[:3]
+    assert [text for _, text in lines] == labels[:4]
     assert "Writes shot_cloth.usdc" in labels
     assert [x for kind, x in log if kind == "operator"] == [
         "cloth_usd.use_last_import", "cloth_usd.inspect", "cloth_usd.bake"]
