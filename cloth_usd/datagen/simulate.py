@@ -31,6 +31,7 @@ import numpy as np
 
 from ..core.association import associate, surface_at
 from ..core.body import BodyModel, posed_vertices, shape_body
+from ..core.features import vertex_normals
 from ..errors import ClothUsdError
 
 __all__ = [
@@ -334,15 +335,6 @@ def _kernels():
 # --------------------------------------------------------------------------- geometry
 
 
-def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """(V, 3) area-weighted unit vertex normals of one mesh."""
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-    n = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(n, f[:, k], fn)
-    return n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-
-
 def penetration_fraction(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray,
                          *, tolerance: float = 0.0) -> float:
     """Fraction of points inside a closed body: behind the body's closest surface point.
@@ -372,7 +364,7 @@ def body_side(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndar
         body_faces: (F, 3) body triangles.
     """
     closest, normal = surface_at(associate(points, body_vertices, body_faces), body_vertices,
-                                 _vertex_normals(body_vertices, body_faces), body_faces)
+                                 vertex_normals(body_vertices, body_faces), body_faces)
     return np.einsum("nc,nc->n", points - closest, normal)
 
 

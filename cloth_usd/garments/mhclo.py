@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.association import associate
+from ..core.association import associate, surface_at
 from ..core.body import BodyModel, lbs, shape_body
 from ..core.files import models_dir
-from ..core.features import vertex_normals as _vertex_normals
+from ..core.features import vertex_normals
 from .source import GarmentFitError
 
 __all__ = ["Mhclo", "Hm08Map", "read_mhclo", "load_hm08_map", "save_hm08_map", "default_hm08_map_path",
@@ -184,7 +184,7 @@ def surface_points(body_vertices: np.ndarray, body_faces: np.ndarray, triangle: 
     p = np.einsum("hk,hkc->hc", barycentric, body_vertices[corners])
     if lift is None:
         return p
-    n = np.einsum("hk,hkc->hc", barycentric, _vertex_normals(body_vertices, body_faces)[corners])
+    n = np.einsum("hk,hkc->hc", barycentric, vertex_normals(body_vertices, body_faces)[corners])
     n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
     return p + lift[:, None] * n
 
@@ -230,9 +230,7 @@ def build_hm08_map(base_points: np.ndarray, groups: dict[str, np.ndarray], body:
     ids = np.unique(np.concatenate([np.asarray(groups[g]) for g in mapped_groups if g in groups]))
     q = hm[ids] * scale + shift
     a = associate(q, fitted, body.faces)
-    normal = _vertex_normals(fitted, body.faces)[body.faces[a.triangle]]
-    normal = np.einsum("hk,hkc->hc", a.barycentric, normal)
-    closest = surface_points(fitted, body.faces, a.triangle, a.barycentric)
+    closest, normal = surface_at(a, fitted, vertex_normals(fitted, body.faces), body.faces)
     lift = np.einsum("hc,hc->h", q - closest, normal / np.linalg.norm(normal, axis=1, keepdims=True))
     on_skin = np.isin(ids, np.asarray(groups["body"]))
     dist = a.distance[on_skin] * 1e3

@@ -29,8 +29,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..core.body import BodyModel, shape_body
-from ..datagen.simulate import (SimConfig, SimulationError, _import_engine, _vertex_normals, make_collider,
-                                resolve_device)
+from ..core.features import vertex_normals
+from ..datagen.simulate import SimConfig, SimulationError, _import_engine, make_collider, resolve_device
 from ..errors import ArgumentError
 from .pattern import PatternMesh
 
@@ -268,12 +268,10 @@ def push_out(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarr
     Args:
         body_vertices: (V, 3) the T-posed body [m]; body_faces: (F, 3) int.
     """
-    from ..core.association import associate
+    from ..core.association import associate, surface_at
 
-    a = associate(points, body_vertices, body_faces)
-    corners = body_faces[a.triangle]
-    closest = np.einsum("nk,nkc->nc", a.barycentric, body_vertices[corners])
-    normal = np.einsum("nk,nkc->nc", a.barycentric, _vertex_normals(body_vertices, body_faces)[corners])
+    closest, normal = surface_at(associate(points, body_vertices, body_faces), body_vertices,
+                                 vertex_normals(body_vertices, body_faces), body_faces)
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-12)
     depth = np.einsum("nc,nc->n", points - closest, normal)
     out = points.copy()
