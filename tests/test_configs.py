@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import pytest
@@ -59,3 +60,27 @@ def test_the_physics_configs_plan_and_load():
     jobs = plan_jobs(load_config(CONFIGS / "physics_tshirt.json"))
     splits = [j.meta["split"] for j in jobs]
     assert splits.count("train") == 140 and len({j.meta["motion"] for j in jobs}) == 9  # 7 kinds + 2 test motions
+
+
+def test_the_experiment_configs_change_one_thing_from_what_they_measure_against():
+    """The shape part of the test set is the test set's own unseen-body and unseen-shirt
+    sequences; the corner-bodies and more-clips data configs of the T-shirt differ from
+    ``tshirt-v6``'s in what their names say (README, "Tried after tshirt-v6")."""
+    def read(name):
+        return json.loads((CONFIGS / name).read_text())
+
+    full, shape = read("datagen_testset.json"), read("datagen_testset_shape.json")
+    assert shape.pop("simulate_splits") == ["test_body", "test_garment"] and "floor" not in shape
+    assert {k: v for k, v in full.items() if k not in ("simulate_splits", "floor")} == shape
+    base, corners, more = (read(f"physics_tshirt_{n}.json") for n in ("mocap", "corners", "mocap_more"))
+    bodies = corners.pop("bodies")
+    assert bodies == ["short_thin", "short_fat", "tall_thin", "tall_fat", "slim", "broad", "medium_thin"]
+    assert base.pop("bodies") != [] and corners == base
+    motions = more.pop("train_motions")
+    assert motions[:len(base["train_motions"])] == base["train_motions"] and len(motions) == 55
+    held_out = {m["bvh"] for m in base["test_motions"]} | {  # and the README's other held-out clips
+        "cmu-mb2_chrystianosaraujo-motion-viewer/02/02_03.bvh", "cmu-daz_papagina-acLSTM/martial/04.bvh",
+        "cmu-daz_papagina-acLSTM/martial/10.bvh", "cmu-daz_papagina-acLSTM/indian/13.bvh"}
+    assert not {m.get("bvh") for m in motions} & held_out
+    assert more.pop("bodies") == bodies
+    assert more == {k: v for k, v in base.items() if k != "train_motions"}
