@@ -202,6 +202,11 @@ def _shirt_label(params) -> str:
     return "short" if params.hem >= -0.02 else "long" if params.hem <= -0.10 else "regular"
 
 
+def _train_bodies(config: FactoryConfig) -> list[str]:
+    """The names of the config's training bodies: its bodies that are not test bodies."""
+    return [n for n in config.bodies if n not in config.test_bodies]
+
+
 def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
     """Every sequence of the data set, each tagged with its split in ``meta``."""
     body = body if body is not None else load_body_model()
@@ -236,7 +241,7 @@ def plan_jobs(config: FactoryConfig, body=None) -> list[Job]:
         raise ArgumentError(f"bodies: {OWN_BODY!r} is the body of the config's own garment, and it names none")
     body_shapes([b for b in config.test_bodies if b != OWN_BODY])  # validates the names
     train_shirts = [i for i in range(len(variants)) if i not in config.test_shirts]
-    train_bodies = [n for n in config.bodies if n not in config.test_bodies]
+    train_bodies = _train_bodies(config)
     train_m, test_m = _motions(config, "train_motions", body), _motions(config, "test_motions", body)
     sim_fps = float(config.sim.get("fps", SimConfig.fps))
     for kind, motions in (("train_motions", train_m), ("test_motions", test_m)):
@@ -293,7 +298,7 @@ def train_betas(config: FactoryConfig) -> np.ndarray:
     """(K, B) the shape coefficients of the config's training bodies (its own garments' bodies
     among them, read from their files): what a bundle trained on the config records as its
     range of bodies (:func:`~cloth_usd.core.limits.betas_range_record`)."""
-    names = [b for b in config.bodies if b not in config.test_bodies]
+    names = _train_bodies(config)
     rows = [s.betas for s in body_shapes([b for b in names if b != OWN_BODY])]
     if OWN_BODY in names:
         rows += [load_own_garment(f).betas for f in own_garment_files(config)]
