@@ -68,37 +68,53 @@ def _scale_warnings(scene: Scene) -> list[str]:
     return lines
 
 
-def _body_warnings(scene: Scene, body_model: str | PathLike | None, problems: list[str]) -> list[str]:
-    """A line for each garment inside its shaped body or far from it at rest; a body model
-    that cannot be loaded for a character, or lacks its shape components, adds a problem."""
+def _worn_bodies(scene: Scene, body_model: str | PathLike | None, problems: list[str]) -> dict[str, BodyModel]:
+    """By character prim path: the body model a bake would shape for each character that wears
+    a garment. A character whose body model does not load, or lacks the shape components its
+    betas use, is left out and adds a problem, as it would stop a bake."""
     from .baking.plan import check_shape_components
-    from .core.body import load_body_model, shape_body
+    from .core.body import load_body_model
+
+    wearers = {g.body_path for g in scene.garments}
+    by_gender: dict[str, BodyModel | None] = {}  # None: it does not load (named once)
+    worn = {}
+    for char in scene.characters:
+        if char.prim_path not in wearers:
+            continue
+        if char.gender not in by_gender:
+            try:
+                by_gender[char.gender] = load_body_model(body_model, gender=char.gender)
+            except BodyModelError as e:
+                by_gender[char.gender] = None
+                problems.append(f"<{char.prim_path}>: {e}")
+        body = by_gender[char.gender]
+        if body is None:
+            continue
+        try:
+            check_shape_components(char, body, scene.stage.identifier)
+        except BodyModelError as e:
+            problems.append(str(e))
+            continue
+        worn[char.prim_path] = body
+    return worn
+
+
+def _body_warnings(scene: Scene, body_model: str | PathLike | None, problems: list[str]) -> list[str]:
+    """A line for each garment inside its shaped body or far from it at rest (problems: see
+    :func:`_worn_bodies`)."""
+    from .core.body import shape_body
     from .core.frames import canonical_rest_points, rest_orientation
     from .core.plausibility import body_notes
     from .core.skinning import bind_worn
 
     characters = {c.prim_path: c for c in scene.characters}
-    bodies: dict[str, BodyModel | BodyModelError] = {}
+    bodies = _worn_bodies(scene, body_model, problems)
     lines = []
     for g in scene.garments:
-        char = characters.get(g.body_path)
-        if char is None:
+        body = bodies.get(g.body_path)
+        if body is None:
             continue
-        if char.gender not in bodies:
-            try:
-                bodies[char.gender] = load_body_model(body_model, gender=char.gender)
-            except BodyModelError as e:
-                bodies[char.gender] = e
-                problems.append(f"<{char.prim_path}>: {e}")
-        body = bodies[char.gender]
-        if isinstance(body, BodyModelError):
-            continue
-        try:
-            check_shape_components(char, body, scene.stage.identifier)
-        except BodyModelError as e:
-            if str(e) not in problems:
-                problems.append(str(e))
-            continue
+        char = characters[g.body_path]
         joints = shape_body(body, char.betas)[1]
         rest = canonical_rest_points(g.rest_points, char.rest_root_position,
                                      rest_orientation(char.rest_joints, joints), joints)
