@@ -52,21 +52,17 @@ def range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray,
     """
     notes = []
     limits = None if bundle is None else bundle.betas_limits
-    if limits is not None:  # the bodies this bundle was trained on
-        outside = betas_outside_range(char.betas, limits)
-        if outside.size:
+    outside = betas_outside(char.betas) if limits is None else betas_outside_range(char.betas, limits)
+    if outside.size:
+        listed = ", ".join(f"beta[{i}] = {char.betas[i]:g}" for i in outside)
+        if limits is None:
+            trained = f"the trained range |beta| <= {BETA_LIMIT:g}"
+        else:  # the bodies this bundle was trained on
             lim = np.zeros((len(char.betas), 2))
             lim[:min(len(lim), len(limits))] = limits[:len(lim)]
-            listed = ", ".join(f"beta[{i}] = {char.betas[i]:g}" for i in outside)
             spans = ", ".join(f"beta[{i}] {lim[i, 0]:g}..{lim[i, 1]:g}" for i in outside)
-            notes.append(f"body <{char.prim_path}> has {listed}, outside the bodies bundle '{bundle.name}' was "
-                         f"trained on ({spans}, by more than {BETA_MARGIN:g}), at every frame")
-    else:
-        outside = betas_outside(char.betas)
-        if outside.size:
-            listed = ", ".join(f"beta[{i}] = {char.betas[i]:g}" for i in outside)
-            notes.append(f"body <{char.prim_path}> has {listed}, outside the trained range "
-                         f"|beta| <= {BETA_LIMIT:g}, at every frame")
+            trained = f"the bodies bundle '{bundle.name}' was trained on ({spans}, by more than {BETA_MARGIN:g})"
+        notes.append(f"body <{char.prim_path}> has {listed}, outside {trained}, at every frame")
     poses = None if bundle is None else pose_outliers(motion.poses, limits=bundle.pose_limits)
     if poses is not None:
         first = times[poses.frames[0]]

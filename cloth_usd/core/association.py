@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
-__all__ = ["Association", "associate", "closest_point_on_triangles", "incident_faces", "surface_at"]
+__all__ = ["Association", "associate", "closest_point_on_triangles", "incident_faces", "on_triangles", "surface_at"]
 
 
 @dataclass(frozen=True)
@@ -130,10 +130,20 @@ def surface_at(association: Association, body_vertices: np.ndarray, body_normals
     Returns:
         ``(closest (N, 3) [m], normal (N, 3))``.
     """
-    corners = np.asarray(body_faces)[association.triangle]  # (N, 3)
-    b = association.barycentric
-    return (np.einsum("nk,nkc->nc", b, np.asarray(body_vertices)[corners]),
-            np.einsum("nk,nkc->nc", b, np.asarray(body_normals)[corners]))
+    return on_triangles(association.triangle, association.barycentric, body_vertices, body_normals, body_faces)
+
+
+def on_triangles(triangle: np.ndarray, barycentric: np.ndarray, body_vertices: np.ndarray,
+                 body_normals: np.ndarray, body_faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The points at ``barycentric`` (N, 3) in the body triangles ``triangle`` (N,) and the
+    vertex normal interpolated there (not renormalised): :func:`surface_at` for a stored map.
+
+    Returns:
+        ``(points (N, 3) [m], normal (N, 3))``.
+    """
+    corners = np.asarray(body_faces)[triangle]  # (N, 3)
+    return (np.einsum("nk,nkc->nc", barycentric, np.asarray(body_vertices)[corners]),
+            np.einsum("nk,nkc->nc", barycentric, np.asarray(body_normals)[corners]))
 
 
 def associate(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray,

@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..core.association import associate, surface_at
+from ..core.association import associate, on_triangles, surface_at
 from ..core.body import BodyModel, lbs, shape_body
 from ..core.files import models_dir
 from ..core.features import vertex_normals
@@ -180,13 +180,10 @@ def surface_points(body_vertices: np.ndarray, body_faces: np.ndarray, triangle: 
     Args:
         body_vertices: (V, 3) [m]; body_faces: (F, 3) int; triangle: (H,) int; barycentric: (H, 3).
     """
-    corners = body_faces[triangle]
-    p = np.einsum("hk,hkc->hc", barycentric, body_vertices[corners])
+    p, n = on_triangles(triangle, barycentric, body_vertices, vertex_normals(body_vertices, body_faces), body_faces)
     if lift is None:
         return p
-    n = np.einsum("hk,hkc->hc", barycentric, vertex_normals(body_vertices, body_faces)[corners])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-    return p + lift[:, None] * n
+    return p + lift[:, None] * (n / np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12))
 
 
 def build_hm08_map(base_points: np.ndarray, groups: dict[str, np.ndarray], body: BodyModel, *,
