@@ -140,7 +140,9 @@ def _fit(args: argparse.Namespace) -> int:
                      f"{'turned %g deg, ' % report['turned_deg'] if report.get('turned_deg') else ''}"
                      f"arm pose {report['arm_pose']:g}), "
                      f"{report['vertices']} vertices, median {report['median_distance_mm']:.1f} mm from the body, "
-                     f"{100 * report['inside_fraction']:.1f}% inside, {report['seconds']:.0f} s\n")
+                     f"{100 * report['inside_fraction']:.1f}% inside, "
+                     f"{'%d piece(s) undraped (they fell off the body), ' % report['pieces_undraped'] if report.get('pieces_undraped') else ''}"
+                     f"{report['seconds']:.0f} s\n")
     return 0
 
 

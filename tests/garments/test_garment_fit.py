@@ -1,6 +1,7 @@
 """``cloth-usd garment fit``: readers, the MakeHuman binding, the fit by shape (units, up
-axis, arm pose, unposing) and the one-line refusals. Only the last test drapes (Newton, a
-few hundred vertices, 2 frames)."""
+axis, arm pose, unposing), which pieces a category keeps, and the one-line refusals. Two
+tests drape (Newton, a few frames): a piece the body does not hold keeps its place, and the
+command end to end."""
 
 from __future__ import annotations
 
@@ -187,6 +188,52 @@ def test_tshirt_drops_the_trousers_piece(body):
                      uv_indices=None, meters_per_unit=1.0, up_axis="Y", source="synthetic")
     fitted = fit_garment(src, "tshirt", np.zeros(10), body=body, config=FitConfig(drape_frames=0))
     assert len(fitted.points) == len(top) and fitted.report["pieces_dropped"] == 2  # one per leg
+
+
+def _pieces_source(*pieces):
+    pts = np.concatenate([p for p, _ in pieces])
+    starts = np.cumsum([0] + [len(p) for p, _ in pieces])[:-1]
+    faces = np.concatenate([f + k for (_, f), k in zip(pieces, starts)])
+    return SourceMesh(points=pts, face_counts=np.full(len(faces), 3), face_indices=faces.ravel(), uv=None,
+                      uv_indices=None, meters_per_unit=1.0, up_axis="Y", source="synthetic"), starts
+
+
+def _button(points, faces, near):
+    """A small separate piece: the faces around the vertex nearest ``near``, 3 mm further out."""
+    sel = np.any(faces == np.argmin(np.linalg.norm(points - near, axis=1)), axis=1)
+    used, tri = np.unique(faces[sel], return_inverse=True)
+    return points[used] + [0.0, 0.0, 0.003], tri.reshape(-1, 3)
+
+
+def test_trousers_keep_the_piece_with_legs_and_its_buttons(body):
+    # a bib overall (one piece from the chest down to the knees), a jacket, a button on each
+    overall, _, overall_f = _region_mesh(body, [0, 1, 2, 3, 4, 5, 6])
+    jacket, _, jacket_f = _region_mesh(body, [9, 13, 14, 16, 17])
+    on_overall = _button(overall, overall_f, overall[np.argmax(overall[:, 2])])
+    on_jacket = _button(jacket, jacket_f, jacket[np.argmax(jacket[:, 2])])
+    src, starts = _pieces_source((jacket, jacket_f), (overall, overall_f), on_overall, on_jacket)
+    assert len(on_overall[0]) >= 4 and len(on_jacket[0]) >= 4
+    fitted = fit_garment(src, "trousers", np.zeros(10), body=body, config=FitConfig(drape_frames=0))
+    assert len(fitted.points) == len(overall) + len(on_overall[0])
+    assert fitted.report["pieces_dropped"] == 2  # the jacket and its button
+    # as a T-shirt: the jacket and its button (this overall's centre is below the hips)
+    fitted = fit_garment(src, "tshirt", np.zeros(10), body=body, config=FitConfig(drape_frames=0))
+    assert len(fitted.points) == len(jacket) + len(on_jacket[0]) and fitted.report["pieces_dropped"] == 2
+
+
+@pytest.mark.skipif(not NEWTON, reason="newton is not installed")
+def test_a_piece_the_body_does_not_hold_keeps_its_place(body):
+    from cloth_usd.garments.fit import _hang
+
+    sleeves, _, sleeves_f = _region_mesh(body, [16, 17])  # on the arms
+    legs, _, legs_f = _region_mesh(body, [4, 5], lift=0.05)  # two tubes wider than the knees
+    src, starts = _pieces_source((sleeves, sleeves_f), (legs, legs_f))
+    tri = src.face_indices.reshape(-1, 3)
+    draped, undraped = _hang(body, np.zeros(10), src.points, tri, 4, "synthetic")
+    assert undraped == 2  # one tube per leg fell, and is where it was
+    np.testing.assert_array_equal(draped[starts[1]:], legs)
+    assert np.median(src.points[:starts[1], 1] - draped[:starts[1], 1]) < 0.03  # the sleeves hang on the arms
+    assert not np.array_equal(draped[:starts[1]], sleeves)
 
 
 def test_flat_and_empty_meshes_are_refused(body):
