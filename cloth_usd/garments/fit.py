@@ -17,11 +17,14 @@
    out of the body (:func:`~cloth_usd.garments.sew.push_out`) and draped under gravity on
    the T-posed body with Newton, its rest shape being its own unposed shape; what the
    drape left inside the full-resolution body (its collider is a decimated body) is moved
-   out again, 2 mm from the skin.
+   out again, 2 mm from the skin. A piece the body does not hold up (it falls in the
+   drape) keeps its undraped place.
 
 Pieces (connected parts) of a mesh that belong to another category are dropped: a
 T-shirt keeps the parts whose centre lies above the hips, trousers the parts with legs;
-buttons and buckles go with the part they lie on. Shape letters: N garment vertices, C polygon corners, M triangles, J joints.
+buttons and buckles go with the part they lie on.
+
+Shape letters: N garment vertices, C polygon corners, M triangles, J joints.
 """
 
 from __future__ import annotations
@@ -302,14 +305,13 @@ def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.
     if category == "dress":
         return keep, 0
     pieces = [(label == c) & used for c in np.unique(label[used])]
-    small = [float(np.linalg.norm(np.ptp(points[sel], axis=0))) < DECORATION_SIZE for sel in pieces]
-    for sel, is_small in zip(pieces, small):
+    for sel in pieces:
         if category == "tshirt":
             keep[sel] = float(np.median(points[sel, 1])) >= joints[_PELVIS, 1]
         else:  # trousers
             thigh = points[sel & (points[:, 1] < joints[_PELVIS, 1] - THIGH_BELOW_HIPS)]
             keep[sel] = len(thigh) >= 3 and not np.any(np.abs(thigh[:, 0] - joints[_PELVIS, 0]) < MIDLINE)
-    decorations = [sel for sel, is_small in zip(pieces, small) if is_small]
+    decorations = [sel for sel in pieces if float(np.linalg.norm(np.ptp(points[sel], axis=0))) < DECORATION_SIZE]
     carriers = keep & ~np.logical_or.reduce(decorations) if decorations else keep
     tree = cKDTree(points[carriers]) if np.any(carriers) else None
     for sel in decorations:
