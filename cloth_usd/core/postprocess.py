@@ -24,7 +24,8 @@ from ..errors import ArgumentError
 from .association import closest_point_on_triangles, incident_faces
 
 __all__ = ["push_out", "push_out_of_surface", "nearest_vertex", "nearest_body_points", "search_tree", "garment_margin",
-           "DEFAULT_MARGIN", "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_ROUNDS"]
+           "DEFAULT_MARGIN", "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_ROUNDS",
+           "PLANE_REACH"]
 
 #: Default clearance from the body surface [m] (2 mm).
 DEFAULT_MARGIN = 0.002
@@ -128,18 +129,26 @@ SURFACE_CANDIDATES = 4
 #: Times :func:`push_out_of_surface` measures a vertex it moved against the surface again:
 #: where an arm overlaps the torso, a vertex pushed out of one can land in the other.
 SURFACE_ROUNDS = 3
+#: [m] how far from its body vertex a tangent plane stands for the body's surface: a garment
+#: vertex further than this from its nearest body vertex is measured against the surface
+#: itself. (A MakeHuman sleeve's hem 38 mm outside the upper arm lay 39 mm behind its nearest
+#: body vertex's plane, and the plane's push moved it 41 mm, stretching a 1 mm hem edge 42x.)
+PLANE_REACH = 0.01
 
 
 def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normals: np.ndarray,
                         body_faces: np.ndarray, candidates: np.ndarray, *, margin: float = DEFAULT_MARGIN,
                         reach: float = SEARCH_REACH, neighbours: int = SURFACE_CANDIDATES,
-                        rounds: int = SURFACE_ROUNDS, rings: np.ndarray | None = None,
+                        rounds: int = SURFACE_ROUNDS, plane_reach: float = PLANE_REACH,
+                        rings: np.ndarray | None = None,
                         trees: list | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The post-process: push garment vertices out of the body's surface, to ``margin`` in front of it.
 
     Per frame, each garment vertex's ``neighbours`` nearest candidate body vertices within
     ``reach`` are found. The vertex is pushed in front of the nearest one's tangent plane
-    (:func:`push_out`); where it then still lies behind the tangent plane of another of them
+    (:func:`push_out`) when it lies within ``plane_reach`` of that vertex; where it then still
+    lies behind the tangent plane of one of them (further from the nearest, a plane says
+    little: a vertex outside the body can lie behind it)
     (an arm against the torso, an armpit, a thigh raised into the belly: places where a plane
     is not the surface; the belly's vertices can be the nearer, the thigh's 2 cm off), the
     closest point of the triangles around those vertices is found and the vertex pushed out
@@ -159,6 +168,8 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
             nearest candidates are looked for this far.
         neighbours: candidate vertices tested per garment vertex.
         rounds: surface tests of a vertex, at most (one the test moved is tested again).
+        plane_reach: a vertex further than this [m] from its nearest candidate is not pushed
+            along that candidate's normal, only by the surface test.
         rings: (V', D) int the rows of ``body_faces`` around each body vertex, padded with -1
             (:func:`~cloth_usd.core.association.incident_faces`); made here when None.
         trees: T :func:`search_tree` over each frame's candidates (``body_points[t,
@@ -203,7 +214,8 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     flat = near + offset[:, None]
     q, bp, bn = p[frame, row], flat_b[flat], flat_n[flat] * found[..., None]
     s = np.einsum("rc,rc->r", q - bp[:, 0], bn[:, 0])
-    push = np.where(np.einsum("rc,rc->r", bn[:, 0], bn[:, 0]) > 0, np.maximum(margin - s, 0.0), 0.0)
+    plane = (np.einsum("rc,rc->r", bn[:, 0], bn[:, 0]) > 0) & (np.linalg.norm(q - bp[:, 0], axis=1) <= plane_reach)
+    push = np.where(plane, np.maximum(margin - s, 0.0), 0.0)
     q += push[:, None] * bn[:, 0]
     hit = push > 0
     check = np.flatnonzero((np.einsum("rkc,rkc->rk", q[:, None] - bp, bn) < 0.0).any(axis=1))

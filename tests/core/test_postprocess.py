@@ -189,3 +189,26 @@ def test_a_vertex_inside_a_part_whose_vertices_lie_past_another_parts_is_pushed_
                                      margin=0.002)
     np.testing.assert_allclose(out[0, 0], [0.02, 0.02, 0.002], atol=1e-9)
     assert moved.tolist() == [1]
+
+
+def test_a_vertex_outside_the_body_but_far_behind_its_nearest_body_vertex_plane_stays():
+    from cloth_usd.core.postprocess import push_out_of_surface
+
+    # a block (x < 0, z < 0): its top, the body under the garment (the candidates), and its
+    # side wall; the top's edge vertices have the normal between the two faces'
+    top = np.array([[x, y, 0.0] for y in (-0.04, 0.0, 0.04) for x in (-0.08, -0.04, 0.0)])
+    wall = np.array([[0.0, y, z] for z in (-0.04, -0.08) for y in (-0.04, 0.0, 0.04)])
+    pts = np.concatenate([top, wall])
+    wall_index = np.array([2, 5, 8, 9, 10, 11, 12, 13, 14])  # the top's edge is the wall's first row
+    faces = np.concatenate([_grid_faces(3, 3), wall_index[_grid_faces(3, 3)]])
+    normals = np.tile([0.0, 0.0, 1.0], (len(pts), 1))
+    normals[[2, 5, 8]] = [np.sqrt(0.5), 0.0, np.sqrt(0.5)]
+    normals[9:] = [1.0, 0.0, 0.0]
+    garment = np.array([[[0.01, 0.0, -0.04]]])  # 1 cm in front of the wall, 21 mm behind the edge vertex's plane
+    out, moved = push_out_of_surface(garment, pts[None], normals[None], faces, np.arange(9), margin=0.002)
+    np.testing.assert_array_equal(out, garment)
+    assert moved.tolist() == [0]
+    # measured against that plane, as before PLANE_REACH, it was pushed 23 mm
+    out, _ = push_out_of_surface(garment, pts[None], normals[None], faces, np.arange(9), margin=0.002,
+                                 plane_reach=np.inf)
+    assert np.linalg.norm(out - garment) == pytest.approx(0.0232, abs=1e-3)
