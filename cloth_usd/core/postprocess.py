@@ -146,11 +146,11 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
 
     Per frame, each garment vertex's ``neighbours`` nearest candidate body vertices within
     ``reach`` are found. The vertex is pushed in front of the nearest one's tangent plane
-    (:func:`push_out`) when it lies within ``plane_reach`` of that vertex; where it then still
-    lies behind the tangent plane of one of them (further from the nearest, a plane says
-    little: a vertex outside the body can lie behind it)
-    (an arm against the torso, an armpit, a thigh raised into the belly: places where a plane
-    is not the surface; the belly's vertices can be the nearer, the thigh's 2 cm off), the
+    (:func:`push_out`) when it lies within ``plane_reach`` of that vertex (further off, a plane
+    says little: a vertex outside the body can lie behind it). Where it then still lies
+    behind the tangent plane of one of them (an arm against the torso, an armpit, a thigh
+    raised into the belly: places where a plane is not the surface; the belly's vertices can
+    be the nearer, the thigh's 2 cm off), the
     closest point of the triangles around those vertices is found and the vertex pushed out
     along the normal interpolated there, to ``margin`` in front of the surface, and measured
     again, up to ``rounds`` times.
