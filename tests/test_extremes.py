@@ -274,7 +274,7 @@ def test_a_fit_past_the_limit_is_clamped_and_warned_about(posed_stage, tmp_path,
         result = bake(posed_stage, tmp_path / "c.usdc", tier="coarse", models=bundle)
     (message,) = [m for m in _warnings(caplog) if "fit attribute" in m]
     assert f"<{PRIM}>: its fit on the body </Char/Skel>" in message
-    assert f"the coarse tier reads it clamped to +-{FIT_LIMIT:g}" in message
+    assert f"the coarse tier reads it clamped to +-{FIT_LIMIT:g} (a bundle of its own: cloth-usd train-garment)" in message
     g = result.garments[0]
     assert message in g.warnings and max(abs(a) for a in g.fit) == pytest.approx(FIT_LIMIT)
 

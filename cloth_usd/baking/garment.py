@@ -111,7 +111,8 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
         listed = ", ".join(f"{a:.3g}" for a in measured)
         warnings.append(f"{where}: its fit on the body <{char.prim_path}> (fit attribute {listed}) lies past "
                         f"+-{FIT_LIMIT:g} on a factor, beyond the garments bundle '{bundle.name}' was trained on; the "
-                        f"{tier.value} tier reads it clamped to +-{FIT_LIMIT:g}")
+                        f"{tier.value} tier reads it clamped to +-{FIT_LIMIT:g} (a bundle of its own: "
+                        f"cloth-usd train-garment)")
     for w in warnings:
         log.warning("%s", w)
     poses, transl = motion.poses, motion.transl
