@@ -66,10 +66,10 @@ FALL = 0.03
 DECORATION_SIZE = 0.1
 #: [m] a decoration further than this (its median vertex) from every kept piece is dropped.
 DECORATION_GAP = 0.02
-#: [m] trousers' legs are looked for this far below the hip joints (the upper thigh) ...
+#: [m] trousers' legs are looked for this far below the hip joints (the upper thigh, 7 cm
+#: below the crotch of the mean body): there a piece with legs parts into a left and a right
+#: tube, where a skirt or a coat stays one.
 THIGH_BELOW_HIPS = 0.2
-#: [m] ... where no vertex of a leg lies this near the body's midline.
-MIDLINE = 0.015
 
 
 @dataclass(frozen=True)
@@ -295,9 +295,9 @@ def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.
     belong to ``category`` (vertices in no polygon are dropped too, uncounted).
 
     A T-shirt keeps the pieces whose centre lies above the hips; trousers the pieces with
-    legs (below the upper thigh, nothing of them on the body's midline: a bib overall has
-    them, a coat or a jacket does not). A piece smaller than :data:`DECORATION_SIZE` (a button, a
-    buckle) goes with the kept piece it lies on, within :data:`DECORATION_GAP`."""
+    legs (:func:`_has_legs`: a bib overall has them, a coat or a jacket does not). A piece
+    smaller than :data:`DECORATION_SIZE` (a button, a buckle) goes with the kept piece it
+    lies on, within :data:`DECORATION_GAP`."""
     label = _components(len(points), tri)
     used = np.zeros(len(points), dtype=bool)
     used[np.unique(tri)] = True
@@ -309,8 +309,7 @@ def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.
         if category == "tshirt":
             keep[sel] = float(np.median(points[sel, 1])) >= joints[_PELVIS, 1]
         else:  # trousers
-            thigh = points[sel & (points[:, 1] < joints[_PELVIS, 1] - THIGH_BELOW_HIPS)]
-            keep[sel] = len(thigh) >= 3 and not np.any(np.abs(thigh[:, 0] - joints[_PELVIS, 0]) < MIDLINE)
+            keep[sel] = _has_legs(points, tri, sel, joints[_PELVIS])
     decorations = [sel for sel in pieces if float(np.linalg.norm(np.ptp(points[sel], axis=0))) < DECORATION_SIZE]
     carriers = keep & ~np.logical_or.reduce(decorations) if decorations else keep
     tree = cKDTree(points[carriers]) if np.any(carriers) else None
@@ -319,6 +318,22 @@ def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.
     if not keep.any():
         raise GarmentFitError(f"no piece of the mesh sits where a {category} is worn (every part was dropped)")
     return keep, sum(not keep[sel].any() for sel in pieces)
+
+
+def _has_legs(points: np.ndarray, tri: np.ndarray, piece: np.ndarray, pelvis: np.ndarray) -> bool:
+    """Whether the ``piece`` (N,) bool of the garment (``points`` (N, 3) [m], ``tri`` (M, 3)) has
+    legs: its triangles :data:`THIGH_BELOW_HIPS` below the ``pelvis`` joint (3,) [m] part into
+    pieces left and right of it. Thighs that touch (a heavy body) do not join two legs, as
+    a test of nearness to the midline would."""
+    below = piece & (points[:, 1] < pelvis[1] - THIGH_BELOW_HIPS)
+    faces = tri[np.all(below[tri], axis=1)]
+    if not len(faces):
+        return False
+    label = _components(len(points), faces)
+    used = np.unique(faces)
+    sides = {float(np.sign(np.median(points[used[label[used] == c], 0]) - pelvis[0]))
+             for c in np.unique(label[used]) if np.count_nonzero(label[used] == c) >= 3}
+    return {-1.0, 1.0} <= sides
 
 
 def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: BodyModel,
@@ -377,7 +392,10 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
         report.update(method="shape", units_m=unit, units_from=units_from, up_axis=up,
                       turned_deg=round(float(turn) % 360.0, 1), arm_pose=frac,
                       align_mean_mm=round(score * 1e3, 1), **({"mhclo_skipped": why_not} if mhclo is not None else {}))
-    keep, dropped = _keep_pieces(posed_points, tri, category, joints)
+    try:
+        keep, dropped = _keep_pieces(posed_points, tri, category, joints)
+    except GarmentFitError as e:
+        raise GarmentFitError(f"{src.source}: {e}") from None
     rest = _unpose(posed_points, weights, joints, pose, body.parents)
     # the pieces kept, renumbered; polygons with a dropped vertex go
     new_index = np.cumsum(keep) - 1

@@ -464,3 +464,37 @@ def test_fit_by_shape_turns_a_garment_that_faces_another_way(body, turn):
     assert abs((fitted.report["turned_deg"] - turn + 180.0) % 360.0 - 180.0) <= 1.0, fitted.report["turned_deg"]
     err = np.linalg.norm(fitted.points - rest, axis=1)
     assert np.median(err) < 0.01, np.median(err)
+
+
+def _tube(centre, radius, top, bottom, around=48, rows=12):
+    """A vertical open cylinder (points (A * R, 3), triangles) about ``centre`` (x, z) [m]."""
+    a = np.linspace(0.0, 2.0 * np.pi, around, endpoint=False)
+    y = np.linspace(top, bottom, rows)
+    pts = np.array([[centre[0] + radius * np.cos(t), h, centre[1] + radius * np.sin(t)] for h in y for t in a])
+    faces = [f for j in range(rows - 1) for i in range(around)
+             for f in ((j * around + i, j * around + (i + 1) % around, (j + 1) * around + i),
+                       (j * around + (i + 1) % around, (j + 1) * around + (i + 1) % around, (j + 1) * around + i))]
+    return pts, np.array(faces)
+
+
+def test_trousers_on_touching_thighs_keep_their_legs_and_a_skirt_goes(body):
+    from cloth_usd.garments.fit import _has_legs, _keep_pieces
+
+    _, joints = shape_body(body, np.zeros(10))
+    pelvis = joints[0]
+    # two leg tubes whose inner sides come 3 mm from the midline (thighs that touch), joined
+    # above the crotch by a waist tube; and a skirt round both legs
+    waist = _tube((pelvis[0], pelvis[2]), 0.17, pelvis[1] + 0.1, pelvis[1] - 0.1)
+    left = _tube((pelvis[0] + 0.073, pelvis[2]), 0.07, pelvis[1] - 0.1, pelvis[1] - 0.7)
+    right = _tube((pelvis[0] - 0.073, pelvis[2]), 0.07, pelvis[1] - 0.1, pelvis[1] - 0.7)
+    skirt = _tube((pelvis[0], pelvis[2]), 0.2, pelvis[1] - 0.05, pelvis[1] - 0.5)
+    src, starts = _pieces_source(waist, left, right, skirt)
+    tri = src.face_indices.reshape(-1, 3)
+    tri = np.concatenate([tri, [[0, starts[1], starts[2]]]])  # the legs hang from the waist: one piece
+    trousers = np.zeros(len(src.points), bool)
+    trousers[:starts[3]] = True
+    assert _has_legs(src.points, tri, trousers, pelvis)
+    assert not _has_legs(src.points, tri, ~trousers, pelvis)
+    keep, dropped = _keep_pieces(src.points, tri, "trousers", joints)
+    np.testing.assert_array_equal(keep, trousers)
+    assert dropped == 1
