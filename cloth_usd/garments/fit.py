@@ -290,9 +290,11 @@ def _check_shape(src: SourceMesh, tri: np.ndarray) -> None:
                               "units); a garment wraps round the body, so it cannot be fitted")
 
 
-def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.ndarray) -> tuple[np.ndarray, int]:
+def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.ndarray,
+                 source: str) -> tuple[np.ndarray, int]:
     """``(keep (N,) bool, pieces dropped)``: the vertices of the pieces (connected parts) that
-    belong to ``category`` (vertices in no polygon are dropped too, uncounted).
+    belong to ``category`` (vertices in no polygon are dropped too, uncounted); ``source``
+    names the file in the refusal when none does.
 
     A T-shirt keeps the pieces whose centre lies above the hips; trousers the pieces with
     legs (:func:`_has_legs`: a bib overall has them, a coat or a jacket does not). A piece
@@ -316,7 +318,8 @@ def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.
     for sel in decorations:
         keep[sel] = tree is not None and float(np.median(tree.query(points[sel])[0])) <= DECORATION_GAP
     if not keep.any():
-        raise GarmentFitError(f"no piece of the mesh sits where a {category} is worn (every part was dropped)")
+        raise GarmentFitError(f"{source}: no piece of the mesh sits where a {category} is worn (every part was "
+                              "dropped)")
     return keep, sum(not keep[sel].any() for sel in pieces)
 
 
@@ -329,10 +332,10 @@ def _has_legs(points: np.ndarray, tri: np.ndarray, piece: np.ndarray, pelvis: np
     faces = tri[np.all(below[tri], axis=1)]
     if not len(faces):
         return False
-    label = _components(len(points), faces)
     used = np.unique(faces)
-    sides = {float(np.sign(np.median(points[used[label[used] == c], 0]) - pelvis[0]))
-             for c in np.unique(label[used]) if np.count_nonzero(label[used] == c) >= 3}
+    label = _components(len(points), faces)[used]
+    parts, sizes = np.unique(label, return_counts=True)
+    sides = {float(np.sign(np.median(points[used[label == c], 0]) - pelvis[0])) for c in parts[sizes >= 3]}
     return {-1.0, 1.0} <= sides
 
 
@@ -392,10 +395,7 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
         report.update(method="shape", units_m=unit, units_from=units_from, up_axis=up,
                       turned_deg=round(float(turn) % 360.0, 1), arm_pose=frac,
                       align_mean_mm=round(score * 1e3, 1), **({"mhclo_skipped": why_not} if mhclo is not None else {}))
-    try:
-        keep, dropped = _keep_pieces(posed_points, tri, category, joints)
-    except GarmentFitError as e:
-        raise GarmentFitError(f"{src.source}: {e}") from None
+    keep, dropped = _keep_pieces(posed_points, tri, category, joints, src.source)
     rest = _unpose(posed_points, weights, joints, pose, body.parents)
     # the pieces kept, renumbered; polygons with a dropped vertex go
     new_index = np.cumsum(keep) - 1

@@ -495,6 +495,6 @@ def test_trousers_on_touching_thighs_keep_their_legs_and_a_skirt_goes(body):
     trousers[:starts[3]] = True
     assert _has_legs(src.points, tri, trousers, pelvis)
     assert not _has_legs(src.points, tri, ~trousers, pelvis)
-    keep, dropped = _keep_pieces(src.points, tri, "trousers", joints)
+    keep, dropped = _keep_pieces(src.points, tri, "trousers", joints, "synthetic")
     np.testing.assert_array_equal(keep, trousers)
     assert dropped == 1
