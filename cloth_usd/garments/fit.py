@@ -70,6 +70,15 @@ DECORATION_GAP = 0.02
 #: below the crotch of the mean body): there a piece with legs parts into a left and a right
 #: tube, where a skirt or a coat stays one.
 THIGH_BELOW_HIPS = 0.2
+#: [m] shorts whose legs end above :data:`THIGH_BELOW_HIPS` (hot pants) are looked at this far
+#: above their lowest point: their leg openings.
+LEG_OPENING = 0.02
+#: [m] legs are looked for no higher than this below the hip joints (the mean body's crotch
+#: lies 13 cm below them): a piece that ends above it (a jacket, a crop top) has none.
+LEG_TOP = 0.1
+#: [m] a leg's middle lies at least this far to the side of the hip joints (a thigh's lies 8-10
+#: cm off): the front and back panels of a shirt with side slits do not make legs.
+LEG_SIDE = 0.03
 
 
 @dataclass(frozen=True)
@@ -325,18 +334,28 @@ def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.
 
 def _has_legs(points: np.ndarray, tri: np.ndarray, piece: np.ndarray, pelvis: np.ndarray) -> bool:
     """Whether the ``piece`` (N,) bool of the garment (``points`` (N, 3) [m], ``tri`` (M, 3)) has
-    legs: its triangles :data:`THIGH_BELOW_HIPS` below the ``pelvis`` joint (3,) [m] part into
-    pieces left and right of it. Thighs that touch (a heavy body) do not join two legs, as
-    a test of nearness to the midline would."""
-    below = piece & (points[:, 1] < pelvis[1] - THIGH_BELOW_HIPS)
-    faces = tri[np.all(below[tri], axis=1)]
-    if not len(faces):
+    legs: its vertices :data:`THIGH_BELOW_HIPS` below the ``pelvis`` joint (3,) [m] (or, for
+    a piece that ends above that, within :data:`LEG_OPENING` of its lowest point, if that lies
+    :data:`LEG_TOP` below the joint), joined by
+    the mesh's edges between them, part into pieces on the left and the right of it, at least
+    :data:`LEG_SIDE` off. Thighs that touch (a heavy body) do not join two legs, as a test of
+    nearness to the midline would; edges rather than whole triangles join them, so that a hem
+    of one row of vertices is a ring."""
+    if not piece.any():
         return False
-    used = np.unique(faces)
-    label = _components(len(points), faces)[used]
+    level = max(pelvis[1] - THIGH_BELOW_HIPS, float(points[piece, 1].min()) + LEG_OPENING)
+    if level > pelvis[1] - LEG_TOP:
+        return False
+    below = piece & (points[:, 1] < level)
+    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    edges = edges[np.all(below[edges], axis=1)]
+    if not len(edges):
+        return False
+    used = np.unique(edges)
+    label = _components(len(points), np.column_stack([edges, edges[:, 1]]))[used]
     parts, sizes = np.unique(label, return_counts=True)
-    sides = {float(np.sign(np.median(points[used[label == c], 0]) - pelvis[0])) for c in parts[sizes >= 3]}
-    return {-1.0, 1.0} <= sides
+    offsets = [float(np.median(points[used[label == c], 0]) - pelvis[0]) for c in parts[sizes >= 3]]
+    return {-1.0, 1.0} <= {float(np.sign(o)) for o in offsets if abs(o) >= LEG_SIDE}
 
 
 def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: BodyModel,
