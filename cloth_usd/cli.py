@@ -146,6 +146,10 @@ def _parser() -> argparse.ArgumentParser:
     tg.add_argument("--work", metavar="DIR", help="folder for the data config and the two runs (default: OUT.work)")
     tg.add_argument("--motions", metavar="JSON", help="extra training motions: a JSON list of train_motions "
                                                      "entries (procedural or {\"bvh\": ...}; see cloth-usd datagen)")
+    tg.add_argument("--test-motions", metavar="JSON", help="the held-out motions of the Newton test set config the "
+                                                          "work folder gets (testset.json: cloth-usd datagen of it "
+                                                          "simulates them alone), entries as --motions (default: a "
+                                                          "procedural dance and walk)")
     tg.add_argument("--mocap", metavar="DIR", help="the folder the --motions BVH clips are relative to")
     tg.add_argument("--coarse-epochs", type=int, default=8, help="coarse epochs (default 8)")
     tg.add_argument("--detail-epochs", type=int, default=3, help="detail epochs (default 3)")
@@ -477,16 +481,24 @@ def _train_garment(args: argparse.Namespace) -> int:
     from .core.frames import canonical_rest_points, rest_orientation
     from .datagen.factory import OwnGarment
     from .errors import ArgumentError
-    from .nn.own_garment import OwnGarmentPlan, train_own_garment
+    from .nn.own_garment import TEST_SET_CONFIG, OwnGarmentPlan, train_own_garment
     from .usd.read import open_stage, read_scene
 
     plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches)
-    motions: tuple = ()
-    if args.motions:
+
+    def motion_list(flag: str, path: str | None) -> tuple:
+        if not path:
+            return ()
         try:
-            motions = tuple(json.loads(Path(args.motions).read_text()))
-        except (OSError, ValueError, TypeError) as exc:
-            raise ArgumentError(f"--motions {args.motions}: not a readable JSON list ({exc})") from None
+            found = json.loads(Path(path).read_text())
+        except (OSError, ValueError) as exc:
+            raise ArgumentError(f"{flag} {path}: not a readable JSON list ({exc})") from None
+        if not isinstance(found, list) or not all(isinstance(m, dict) for m in found):
+            raise ArgumentError(f"{flag} {path}: expected a JSON list of motion entries (objects), got "
+                                f"{type(found).__name__}")
+        return tuple(found)
+
+    motions, test_motions = motion_list("--motions", args.motions), motion_list("--test-motions", args.test_motions)
     body = load_body_model()
     owns, prims = [], []
     for path in args.scene:
@@ -517,17 +529,21 @@ def _train_garment(args: argparse.Namespace) -> int:
                          f"{'skinning' if tier == 'coarse' else 'the coarse garment'}), {r.seconds:.0f} s\n")
         sys.stdout.flush()
 
+    mocap = f" --mocap {args.mocap or 'MOCAP'}" if any("bvh" in m for m in test_motions) else ""  # the test set's clips
     out = Path(args.out)
     result = train_own_garment(owns, out, name=args.name or out.name, work_dir=args.work, motions=motions,
-                               mocap_dir=args.mocap, plan=plan, force=args.force, device=args.device, body=body,
-                               progress=show)
+                               test_motions=test_motions, mocap_dir=args.mocap, plan=plan, force=args.force,
+                               device=args.device, body=body, progress=show)
     t = result.seconds
     what = f"{prims[0]} ({owns[0].vertices.shape[0]} vertices)" if len(owns) == 1 else \
         f"{len(owns)} {owns[0].category} garments ({', '.join(str(g.vertices.shape[0]) for g in owns)} vertices)"
     sys.stdout.write(f"wrote bundle {result.bundle} for {what} in "
                      f"{t['total'] / 60:.1f} min (coarse {t['coarse'] / 60:.1f}, detail {t['detail'] / 60:.1f}, "
                      f"export {t['export']:.0f} s); runs and config in {result.work_dir}\n"
-                     f"bake with: cloth-usd bake {args.scene[0]} -o CACHE.usdc --tier detail --models {result.bundle}\n")
+                     f"bake with: cloth-usd bake {args.scene[0]} -o CACHE.usdc --tier detail --models {result.bundle}\n"
+                     f"a Newton test set for it: cloth-usd datagen {result.work_dir / TEST_SET_CONFIG} -o TESTSET"
+                     f"{mocap}, then cloth-usd evaluate --data TESTSET "
+                     f"--bundle {result.bundle}\n")
     return 0
 
 

@@ -13,7 +13,9 @@ folder). Then the coarse model and the detail model are trained on the garment's
 physics (:func:`~cloth_usd.nn.physics_train.train_physics`: no simulation), and both are
 exported and verified as a bundle (:func:`~cloth_usd.nn.export.export_bundle`). The work
 folder keeps the config and both runs (curves, histories), so each step can be rerun by
-hand with ``cloth-usd train`` and ``cloth-usd export``.
+hand with ``cloth-usd train`` and ``cloth-usd export``, and a second config, ``testset.json``:
+the same garments and bodies, whose held-out motions alone ``cloth-usd datagen`` simulates, a
+Newton test set for ``cloth-usd evaluate``.
 """
 
 from __future__ import annotations
@@ -35,7 +37,8 @@ from ..errors import ArgumentError
 if TYPE_CHECKING:
     from ..datagen.factory import OwnGarment
 
-__all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "TRAIN_BODIES", "train_own_garment"]
+__all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "TEST_SET_CONFIG", "TRAIN_BODIES",
+           "train_own_garment"]
 
 log = logging.getLogger(__name__)
 
@@ -47,11 +50,19 @@ VAL_BODY = "medium_thin"
 PROCEDURAL_MOTIONS = tuple({"kind": k, "seconds": 1.0, "fps": 30, "seed": i, "blend_seconds": 0.25}
                            for i, k in enumerate(("walk", "run", "arm_raise", "arm_swing", "torso_twist",
                                                   "torso_bend", "dance")))
-#: The held-out motions (validation uses the last; the others are for ``cloth-usd datagen``
-#: of the same config, should the user simulate a test set).
+#: The held-out motions of the training config: its validation sequence wears the last; the
+#: test set config (:data:`TEST_SET_CONFIG`) simulates them unless the user names others.
 TEST_MOTIONS = ({"kind": "dance", "seconds": 2.0, "fps": 30, "seed": 100, "blend_seconds": 0.25},
                 {"kind": "walk", "seconds": 2.0, "fps": 30, "seed": 101, "blend_seconds": 0.25})
 DATA_CONFIG = "data.json"
+#: The work folder's test set config: ``cloth-usd datagen`` of it simulates the held-out
+#: motions only (split ``test_motion``: the garment on its own body and the slim one; split
+#: ``test_body``: the first motion on the validation body), not the training sequences the
+#: training config plans (91 sequences for one garment trained with the ten clips of
+#: ``configs/own_garment_motions.json``; this one plans 7 for one garment and three test motions).
+TEST_SET_CONFIG = "testset.json"
+#: The splits the test set config simulates.
+TEST_SET_SPLITS = ("test_motion", "test_body")
 #: The garments in the work folder: ``garment.npz``, then ``garment1.npz``, ``garment2.npz``, ...
 GARMENT_FILE = "garment.npz"
 
@@ -123,7 +134,8 @@ def _garment_file(i: int) -> str:
 
 def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
                       name: str, work_dir: str | Path | None = None,
-                      motions: tuple[dict, ...] = (), mocap_dir: str | Path | None = None,
+                      motions: tuple[dict, ...] = (), test_motions: tuple[dict, ...] = (),
+                      mocap_dir: str | Path | None = None,
                       plan: OwnGarmentPlan = OwnGarmentPlan(), force: bool = False, device: str | None = "auto",
                       body: BodyModel | None = None,
                       progress: Callable[[str, object], None] | None = None) -> OwnGarmentResult:
@@ -137,7 +149,10 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
         name: the bundle's name (recorded in every cache it bakes).
         work_dir: where the config and the runs go (default: ``<out_dir>.work``).
         motions: extra training motions, entries as a data set config's ``train_motions``.
-        mocap_dir: the folder their ``bvh`` entries are relative to.
+        test_motions: the motions of the test set config (:data:`TEST_SET_CONFIG`), entries
+            as ``motions``; none: :data:`TEST_MOTIONS`. Not trained on, nor checked here (the
+            test set's ``cloth-usd datagen`` reads them).
+        mocap_dir: the folder the ``bvh`` entries of ``motions`` are relative to.
         plan: epochs, batches and widths.
         force: replace an existing bundle, and runs this command left in ``work_dir``.
         progress: called with ``(tier, EpochRecord)`` after every epoch.
@@ -178,6 +193,9 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
             "test_body_shirts": 1, "sim": {"fps": 30}, "train_motions": [*PROCEDURAL_MOTIONS, *motions],
             "test_motions": list(TEST_MOTIONS)}
     _write_json(work / DATA_CONFIG, data)
+    _write_json(work / TEST_SET_CONFIG, {**data, "train_motions": list(PROCEDURAL_MOTIONS),
+                                         "test_motions": list(test_motions or TEST_MOTIONS),
+                                         "simulate_splits": list(TEST_SET_SPLITS)})
     _write_json(work / "coarse.json", plan.coarse_config())
     _write_json(work / "detail.json", plan.detail_config())
     seconds: dict[str, float] = {}

@@ -76,6 +76,11 @@ def test_train_garment_refuses_an_existing_bundle_and_a_stage_without_that_garme
     assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--garment", "/Nope"]) == 2
     err = capsys.readouterr().err
     assert "/Nope" in err and "/Character/Tshirt" in err and not (tmp_path / "c").exists()
+    (tmp_path / "m.json").write_text('{"bvh": "a.bvh"}')  # an entry, not a list of them
+    assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--test-motions", str(tmp_path / "m.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--test-motions" in err and "m.json" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "c").exists()
 
 
 @pytest.mark.slow
@@ -85,10 +90,23 @@ def test_train_garment_makes_a_bundle_that_bakes_the_sample(tmp_path, capsys):
     from cloth_usd.runtime.bundle import load_bundle
 
     out = tmp_path / "mine"
+    held_out = [{"kind": "arm_raise", "seconds": 1.0, "fps": 30, "seed": 40}]
+    (tmp_path / "test_motions.json").write_text(json.dumps(held_out))
     assert main(["train-garment", str(SAMPLE), "-o", str(out), "--coarse-epochs", "1", "--detail-epochs", "1",
-                 "--batches", "1", "--threads", "1", "--device", "cpu"]) == 0
+                 "--batches", "1", "--threads", "1", "--device", "cpu",
+                 "--test-motions", str(tmp_path / "test_motions.json")]) == 0
     said = capsys.readouterr().out
-    assert "wrote bundle" in said and "3516 vertices" in said
+    assert "wrote bundle" in said and "3516 vertices" in said and "testset.json" in said
+    # the work folder's test set config plans the held-out motion, and datagen simulates that alone:
+    # the garment on its own body and on the slim one, and on the validation body
+    testset = load_config(tmp_path / "mine.work" / "testset.json")
+    simulated = [j for j in plan_jobs(testset) if j.meta["split"] in testset.simulate_splits]
+    assert sorted((j.meta["split"], j.meta["body"], j.meta["motion"]) for j in simulated) == [
+        ("test_body", "medium_thin", "arm_raise-s40"), ("test_motion", OWN_BODY, "arm_raise-s40"),
+        ("test_motion", "slim", "arm_raise-s40")]
+    training = load_config(tmp_path / "mine.work" / "data.json")  # trains as before, on the dance and walk held out
+    assert training.simulate_splits is None and testset.garment == training.garment
+    assert [m["kind"] for m in training.test_motions] == ["dance", "walk"]
     bundle = load_bundle(out)
     assert bundle.manifest["category"] == "tshirt" and bundle.manifest["name"] == "mine"
     assert json.loads((tmp_path / "mine.work" / "timing.json").read_text())["total"] > 0
