@@ -106,6 +106,7 @@ def test_train_garment_makes_a_bundle_that_bakes_the_sample(tmp_path, capsys):
         ("test_motion", "slim", "arm_raise-s40")]
     training = load_config(tmp_path / "mine.work" / "data.json")  # trains as before, on the dance and walk held out
     assert training.simulate_splits is None and testset.garment == training.garment
+    assert testset.sim == {**training.sim, "collider_faces": None, "self_contact": False}  # as the shipped test sets
     assert [m["kind"] for m in training.test_motions] == ["dance", "walk"]
     bundle = load_bundle(out)
     assert bundle.manifest["category"] == "tshirt" and bundle.manifest["name"] == "mine"
