@@ -334,13 +334,12 @@ def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.
 
 def _has_legs(points: np.ndarray, tri: np.ndarray, piece: np.ndarray, pelvis: np.ndarray) -> bool:
     """Whether the ``piece`` (N,) bool of the garment (``points`` (N, 3) [m], ``tri`` (M, 3)) has
-    legs: its vertices :data:`THIGH_BELOW_HIPS` below the ``pelvis`` joint (3,) [m] (or, for
-    a piece that ends above that, within :data:`LEG_OPENING` of its lowest point, if that lies
-    :data:`LEG_TOP` below the joint), joined by
-    the mesh's edges between them, part into pieces on the left and the right of it, at least
-    :data:`LEG_SIDE` off. Thighs that touch (a heavy body) do not join two legs, as a test of
-    nearness to the midline would; edges rather than whole triangles join them, so that a hem
-    of one row of vertices is a ring."""
+    legs: its vertices :data:`THIGH_BELOW_HIPS` below the ``pelvis`` joint (3,) [m] (or, for a
+    piece that ends above that, within :data:`LEG_OPENING` of its lowest point, if that lies
+    :data:`LEG_TOP` below the joint), joined by the mesh's edges between them, part into
+    pieces on the left and the right of it, at least :data:`LEG_SIDE` off. Thighs that touch
+    (a heavy body) do not join two legs, as a test of nearness to the midline would; edges
+    rather than whole triangles join them, so that a hem of one row of vertices is a ring."""
     if not piece.any():
         return False
     level = max(pelvis[1] - THIGH_BELOW_HIPS, float(points[piece, 1].min()) + LEG_OPENING)

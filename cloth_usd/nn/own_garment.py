@@ -67,7 +67,7 @@ TEST_SET_SPLITS = ("test_motion", "test_body")
 #: those of the shipped test sets (``configs/datagen_testset.json``), the full body mesh as the
 #: collider and no self-contact. (With the defaults, a decimated collider and self-contact, the
 #: MakeHuman top's seven sequences took 31 min on one worker and two went unstable; without,
-#: six took 7 min on two and none did.)
+#: 7.9 min on two and none did.)
 TEST_SET_SIM = {"collider_faces": None, "self_contact": False}
 #: The garments in the work folder: ``garment.npz``, then ``garment1.npz``, ``garment2.npz``, ...
 GARMENT_FILE = "garment.npz"

@@ -77,7 +77,8 @@ def test_train_garment_refuses_an_existing_bundle_and_a_stage_without_that_garme
     err = capsys.readouterr().err
     assert "/Nope" in err and "/Character/Tshirt" in err and not (tmp_path / "c").exists()
     (tmp_path / "m.json").write_text('{"bvh": "a.bvh"}')  # an entry, not a list of them
-    assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--test-motions", str(tmp_path / "m.json")]) == 2
+    assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"),
+                 "--test-motions", str(tmp_path / "m.json")]) == 2
     err = capsys.readouterr().err
     assert "--test-motions" in err and "m.json" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "c").exists()
