@@ -163,10 +163,14 @@ def triangulate_polygons(counts: np.ndarray, indices: np.ndarray) -> tuple[np.nd
 
 
 def _components(num: int, tri: np.ndarray) -> np.ndarray:
+    return _edge_components(num, np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]]]))
+
+
+def _edge_components(num: int, edges: np.ndarray) -> np.ndarray:
+    """(num,) the connected part of each of ``num`` vertices joined by ``edges`` (E, 2)."""
     from scipy.sparse.csgraph import connected_components
 
-    e = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]]])
-    adj = sparse.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(num, num))
+    adj = sparse.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(num, num))
     return connected_components(adj, directed=False)[1]
 
 
@@ -351,7 +355,7 @@ def _has_legs(points: np.ndarray, tri: np.ndarray, piece: np.ndarray, pelvis: np
     if not len(edges):
         return False
     used = np.unique(edges)
-    label = _components(len(points), np.column_stack([edges, edges[:, 1]]))[used]
+    label = _edge_components(len(points), edges)[used]
     parts, sizes = np.unique(label, return_counts=True)
     offsets = [float(np.median(points[used[label == c], 0]) - pelvis[0]) for c in parts[sizes >= 3]]
     return {-1.0, 1.0} <= {float(np.sign(o)) for o in offsets if abs(o) >= LEG_SIDE}

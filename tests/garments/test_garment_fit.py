@@ -477,17 +477,14 @@ def _tube(centre, radius, top, bottom, around=48, rows=12):
     return pts, np.array(faces)
 
 
-def test_trousers_on_touching_thighs_keep_their_legs_and_a_skirt_goes(body):
+def _assert_legs_kept_and_skirt_dropped(body, left, right, skirt):
+    """Two leg tubes (points, triangles) hung from a waist tube above the crotch make one piece
+    with legs, which trousers keep; the ``skirt`` has none and goes."""
     from cloth_usd.garments.fit import _has_legs, _keep_pieces
 
     _, joints = shape_body(body, np.zeros(10))
     pelvis = joints[0]
-    # two leg tubes whose inner sides come 3 mm from the midline (thighs that touch), joined
-    # above the crotch by a waist tube; and a skirt round both legs
     waist = _tube((pelvis[0], pelvis[2]), 0.17, pelvis[1] + 0.1, pelvis[1] - 0.1)
-    left = _tube((pelvis[0] + 0.073, pelvis[2]), 0.07, pelvis[1] - 0.1, pelvis[1] - 0.7)
-    right = _tube((pelvis[0] - 0.073, pelvis[2]), 0.07, pelvis[1] - 0.1, pelvis[1] - 0.7)
-    skirt = _tube((pelvis[0], pelvis[2]), 0.2, pelvis[1] - 0.05, pelvis[1] - 0.5)
     src, starts = _pieces_source(waist, left, right, skirt)
     tri = src.face_indices.reshape(-1, 3)
     tri = np.concatenate([tri, [[0, starts[1], starts[2]]]])  # the legs hang from the waist: one piece
@@ -500,29 +497,28 @@ def test_trousers_on_touching_thighs_keep_their_legs_and_a_skirt_goes(body):
     assert dropped == 1
 
 
+def test_trousers_on_touching_thighs_keep_their_legs_and_a_skirt_goes(body):
+    pelvis = shape_body(body, np.zeros(10))[1][0]
+    # two leg tubes whose inner sides come 3 mm from the midline (thighs that touch), joined
+    # above the crotch by a waist tube; and a skirt round both legs
+    _assert_legs_kept_and_skirt_dropped(
+        body, _tube((pelvis[0] + 0.073, pelvis[2]), 0.07, pelvis[1] - 0.1, pelvis[1] - 0.7),
+        _tube((pelvis[0] - 0.073, pelvis[2]), 0.07, pelvis[1] - 0.1, pelvis[1] - 0.7),
+        _tube((pelvis[0], pelvis[2]), 0.2, pelvis[1] - 0.05, pelvis[1] - 0.5))
+
+
 def test_hot_pants_keep_their_short_legs_and_a_short_skirt_or_a_slit_shirt_goes(body):
     """Legs that end 15 cm below the hip joints (above where trousers' legs are looked for) are
     found at their openings, a hem of one row of vertices included; a skirt that ends there, and
     a shirt whose side slits part its hem into a front and a back panel, have none."""
-    from cloth_usd.garments.fit import _has_legs, _keep_pieces
+    from cloth_usd.garments.fit import _has_legs
 
-    _, joints = shape_body(body, np.zeros(10))
-    pelvis = joints[0]
-    waist = _tube((pelvis[0], pelvis[2]), 0.17, pelvis[1] + 0.1, pelvis[1] - 0.1)
+    pelvis = shape_body(body, np.zeros(10))[1][0]
     # each leg two rows 5 cm apart: within 2 cm of the hem lies one row, no whole triangle
-    left = _tube((pelvis[0] + 0.09, pelvis[2]), 0.08, pelvis[1] - 0.1, pelvis[1] - 0.15, rows=2)
-    right = _tube((pelvis[0] - 0.09, pelvis[2]), 0.08, pelvis[1] - 0.1, pelvis[1] - 0.15, rows=2)
-    skirt = _tube((pelvis[0], pelvis[2]), 0.2, pelvis[1] - 0.05, pelvis[1] - 0.15)
-    src, starts = _pieces_source(waist, left, right, skirt)
-    tri = src.face_indices.reshape(-1, 3)
-    tri = np.concatenate([tri, [[0, starts[1], starts[2]]]])  # the legs hang from the waist: one piece
-    shorts = np.zeros(len(src.points), bool)
-    shorts[:starts[3]] = True
-    assert _has_legs(src.points, tri, shorts, pelvis)
-    assert not _has_legs(src.points, tri, ~shorts, pelvis)
-    keep, dropped = _keep_pieces(src.points, tri, "trousers", joints, "synthetic")
-    np.testing.assert_array_equal(keep, shorts)
-    assert dropped == 1
+    _assert_legs_kept_and_skirt_dropped(
+        body, _tube((pelvis[0] + 0.09, pelvis[2]), 0.08, pelvis[1] - 0.1, pelvis[1] - 0.15, rows=2),
+        _tube((pelvis[0] - 0.09, pelvis[2]), 0.08, pelvis[1] - 0.1, pelvis[1] - 0.15, rows=2),
+        _tube((pelvis[0], pelvis[2]), 0.2, pelvis[1] - 0.05, pelvis[1] - 0.15))
 
     # a tunic to 20 cm below the hips whose bottom 6 cm are slit at both sides: a front and a back flap
     shirt, shirt_f = _tube((pelvis[0], pelvis[2]), 0.18, pelvis[1] + 0.4, pelvis[1] - 0.2, around=48, rows=13)
