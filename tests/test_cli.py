@@ -299,3 +299,14 @@ def test_train_refuses_physics_settings_for_a_supervised_run(tmp_path, capsys):
     assert main(["train", "coarse", "--data", str(tmp_path), "-o", str(tmp_path / "run"), "--config", str(config)]) == 2
     assert "dynamc" in capsys.readouterr().err
     assert not (tmp_path / "run").exists()
+
+
+@pytest.mark.parametrize("flag, value", [("--batch", "0"), ("--workers", "0"), ("--penetration-frames", "0"),
+                                         ("--max-minutes", "-1")])
+def test_datagen_refuses_a_bad_count_in_one_line(tmp_path, capsys, flag, value):
+    config = tmp_path / "c.json"
+    config.write_text("{}")
+    assert main(["datagen", str(config), "-o", str(tmp_path / "d"), flag, value]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"cloth-usd: error: {flag} must be at least {0 if flag == '--max-minutes' else 1}, got {value}"]
+    assert not (tmp_path / "d").exists()

@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable
@@ -28,7 +29,7 @@ from ..core.body import BodyModel, load_body_model, shape_body
 from ..core.mesh import laplacian_smooth
 from ..core.shards import (MANIFEST_NAME, SHARD_FORMAT, DatasetError, Manifest, Shard, read_shard,  # noqa: F401
                            write_shard)
-from .simulate import SimConfig, SimResult, engine_versions, simulate
+from .simulate import SimConfig, SimItem, SimResult, engine_versions, simulate, simulate_batch
 
 __all__ = [
     "DatasetError",
@@ -153,7 +154,9 @@ def make_shard(job: Job, result: SimResult, body: BodyModel, config: SimConfig,
 def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimConfig(), *,
              body: BodyModel | None = None, dataset: DatasetConfig = DatasetConfig(),
              simulator: Callable[..., SimResult] = simulate,
-             manifest_name: str = MANIFEST_NAME) -> Manifest:
+             manifest_name: str = MANIFEST_NAME, batch: int = 1, penetration_frames: int | None = None,
+             batch_simulator: Callable[..., list[SimResult]] = simulate_batch,
+             deadline: float | None = None) -> Manifest:
     """Simulate every job into ``out_dir/<name>.npz``, resumably.
 
     A job whose shard exists, reads back and carries the job's digest is skipped; so is
@@ -165,7 +168,17 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
         simulator: the simulation function (tests substitute a fake).
         manifest_name: the manifest file; parallel workers each keep their own and the
             caller merges them (shards are shared: their digests make resume safe).
+        batch: simulate up to this many jobs of the same length at once, as one model
+            (:func:`~cloth_usd.datagen.simulate.simulate_batch`: on a GPU about the cost of
+            one); 1 simulates each job alone with ``simulator``.
+        penetration_frames: with ``batch`` > 1, measure the penetration at this many frames
+            of each sequence (None: every frame; see ``simulate_batch``).
+        batch_simulator: the batch simulation function (tests substitute a fake).
+        deadline: ``time.time()`` after which no further simulation starts (the one under way
+            finishes); the jobs left are simulated by a later run (None: no limit).
     """
+    if batch < 1:
+        raise DatasetError(f"batch must be at least 1, got {batch}")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     body = body if body is not None else load_body_model()
@@ -180,6 +193,7 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
         except DatasetError:
             pass
     manifest.config, manifest.dataset, manifest.engine = config.to_json(), dict(dataset.__dict__), engine_versions()
+    pending = []  # (job, digest, shard path) still to simulate
     for job in jobs:
         _check_name(job.name)
         digest = job.digest(config, dataset)
@@ -197,8 +211,9 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
                                                 "meta": job.meta}
                 manifest.write(out, manifest_name)
             continue
-        result = simulator(body, job.betas, job.garment_vertices, job.garment_faces, job.poses, job.transl,
-                           config)
+        pending.append((job, digest, path))
+
+    def record(job: Job, digest: str, path: Path, result: SimResult) -> None:
         entry = {"seed": int(job.seed), "digest": digest, "quality": result.quality(), "meta": job.meta}
         if result.is_stable:
             write_shard(path, make_shard(job, result, body, config, dataset, digest))
@@ -209,5 +224,34 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
             entry.update(status="rejected", shard=None)
         manifest.sequences[job.name] = entry
         manifest.write(out, manifest_name)
+
+    def out_of_time(left: int) -> bool:
+        if deadline is not None and time.time() > deadline:
+            log.warning("deadline passed: %d sequences left unsimulated (run again to continue)", left)
+            return True
+        return False
+
+    if batch == 1:
+        for i, (job, digest, path) in enumerate(pending):
+            if out_of_time(len(pending) - i):
+                break
+            record(job, digest, path, simulator(body, job.betas, job.garment_vertices, job.garment_faces,
+                                                job.poses, job.transl, config))
+    else:
+        by_length: dict[int, list] = {}
+        for p in pending:  # a batch shares its frame count; the jobs' order is kept within a length
+            by_length.setdefault(int(p[0].poses.shape[0]), []).append(p)
+        left = len(pending)
+        for group in by_length.values():
+            for i in range(0, len(group), batch):
+                if out_of_time(left):
+                    break
+                chunk = group[i:i + batch]
+                left -= len(chunk)
+                items = [SimItem(j.betas, j.garment_vertices, j.garment_faces, j.poses, j.transl) for j, _, _ in chunk]
+                log.info("simulating %d sequences of %d frames as one model", len(chunk), chunk[0][0].poses.shape[0])
+                for (job, digest, path), result in zip(chunk, batch_simulator(body, items, config,
+                                                                              penetration_frames=penetration_frames)):
+                    record(job, digest, path, result)
     manifest.write(out, manifest_name)
     return manifest

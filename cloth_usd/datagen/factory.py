@@ -13,6 +13,7 @@ import dataclasses
 import hashlib
 import json
 import logging
+import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
@@ -36,6 +37,10 @@ from .motion import MotionKind, MotionSpec, generate
 from .tshirt import make_tshirt, tshirt_variants
 
 __all__ = ["FactoryConfig", "MOCAP_ENV", "OWN_BODY", "OwnGarment", "own_garment_files", "save_own_garment", "load_own_garment", "load_config", "plan_jobs", "train_poses", "train_betas", "drape_pairs", "run_factory"]
+
+#: Simulation processes start fresh rather than forked: a process forked from one that has
+#: used CUDA (a batched drape runs in the parent) cannot use it.
+_SPAWN = multiprocessing.get_context("spawn")
 
 #: The environment variable naming the mocap folder when neither the config nor ``--mocap`` does.
 MOCAP_ENV = "CLOTH_USD_MOCAP"
@@ -381,8 +386,9 @@ def load_own_garment(path: str | Path) -> OwnGarment:
 
 
 def _worker(args: tuple) -> None:
-    jobs, out_dir, sim, dataset, name = args
-    run_jobs(jobs, out_dir, SimConfig(**sim), dataset=DatasetConfig(**dataset), manifest_name=name)
+    jobs, out_dir, sim, dataset, name, batch, penetration_frames, deadline = args
+    run_jobs(jobs, out_dir, SimConfig(**sim), dataset=DatasetConfig(**dataset), manifest_name=name, batch=batch,
+             penetration_frames=penetration_frames, deadline=deadline)
 
 
 def fit_training_pairs(jobs: list[Job], body) -> tuple[FitModel, dict[str, list[float]]]:
@@ -423,6 +429,39 @@ def _drape_path(out_dir, key: str, verts, faces, betas, sim: dict) -> Path:
     return Path(out_dir) / "drape" / f"{key}.{h.hexdigest()[:16]}.npz"
 
 
+def _save_drape(path: Path, draped: np.ndarray, faces: np.ndarray, verts: np.ndarray, result) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_suffix(".tmp.npz")
+    np.savez(tmp, vertices=draped, faces=faces, source=verts, quality=json.dumps(result.quality()))
+    tmp.replace(path)
+
+
+def _drape_batch(args: list[tuple], batch: int) -> list[tuple[str, str]]:
+    """Drape the pairs of ``args`` (as :func:`_drape_worker` takes them) ``batch`` at a time,
+    each chunk as one model (:func:`~cloth_usd.datagen.simulate.simulate_batch`)."""
+    from .simulate import SimItem, simulate_batch
+
+    todo = [a for a in args if not _drape_path(a[4], a[0], a[1], a[2], a[3], a[5]).exists()]
+    done = [(a[0], "") for a in args if a not in todo]
+    if not todo:
+        return done
+    config = SimConfig(**todo[0][5])
+    frames = max(1, config.drape_frames) + 1
+    body = load_body_model()
+    for i in range(0, len(todo), batch):
+        chunk = todo[i:i + batch]
+        items = [SimItem(b, v, f, np.zeros((frames, 72)), np.zeros((frames, 3))) for _, v, f, b, _, _ in chunk]
+        log.info("draping %d pairs as one model", len(chunk))
+        for (key, verts, faces, betas, out_dir, sim), result in zip(chunk, simulate_batch(body, items, config)):
+            if not result.is_stable:
+                done.append((key, f"drape unstable: {result.failure}"))
+                continue
+            _save_drape(_drape_path(out_dir, key, verts, faces, betas, sim), result.positions[-1].astype(np.float64),
+                        faces, verts, result)
+            done.append((key, ""))
+    return done
+
+
 def _drape_worker(args: tuple) -> tuple[str, str]:
     """Drape one garment-body pair into ``out/drape/<pair>.npz`` (atomic); returns (pair, failure)."""
     key, verts, faces, betas, out_dir, sim = args
@@ -435,23 +474,23 @@ def _drape_worker(args: tuple) -> tuple[str, str]:
         draped, result = drape(load_body_model(), betas, verts, faces, SimConfig(**sim))
     except SimulationError as exc:
         return key, str(exc)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_suffix(".tmp.npz")
-    np.savez(tmp, vertices=draped, faces=faces, source=verts,
-             quality=json.dumps(result.quality()))
-    tmp.replace(path)
+    _save_drape(path, draped, faces, verts, result)
     return key, ""
 
 
-def drape_pairs(jobs: list[Job], out_dir: str | Path, sim: dict, *, workers: int = 1) -> tuple[list[Job], dict]:
+def drape_pairs(jobs: list[Job], out_dir: str | Path, sim: dict, *, workers: int = 1,
+                batch: int = 1) -> tuple[list[Job], dict]:
     """Drape every garment-body pair once (cached in ``out_dir/drape``) and put the draped
-    garment into its jobs. Pairs whose drape went unstable are dropped, with their reason."""
+    garment into its jobs. Pairs whose drape went unstable are dropped, with their reason.
+    With ``batch`` > 1 the pairs are draped that many at a time as one model, in this process."""
     pairs = {}
     for job in jobs:
         pairs.setdefault(_pair(job), (job.garment_vertices, job.garment_faces, job.betas))
     args = [(k, v, f, b, str(out_dir), sim) for k, (v, f, b) in pairs.items()]
-    if workers > 1 and len(args) > 1:
-        with ProcessPoolExecutor(max_workers=min(workers, len(args))) as pool:
+    if batch > 1 and len(args) > 1:
+        done = _drape_batch(args, batch)
+    elif workers > 1 and len(args) > 1:
+        with ProcessPoolExecutor(max_workers=min(workers, len(args)), mp_context=_SPAWN) as pool:
             done = list(pool.map(_drape_worker, args))
     else:
         done = [_drape_worker(a) for a in args]
@@ -479,17 +518,24 @@ def _merge_worker_manifests(out: Path) -> Manifest:
     return merged
 
 
-def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1) -> Manifest:
+def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1, batch: int = 1,
+                penetration_frames: int | None = None, deadline: float | None = None) -> Manifest:
     """Plan, drape every pair to be simulated, fit alpha, simulate (in ``workers``
-    processes), merge the workers' manifests. Resumable: the manifest is merged even when the
-    run is interrupted, and a run killed outright leaves worker manifests the next run folds in."""
+    processes, each simulating ``batch`` sequences at a time as one model; see
+    :func:`~cloth_usd.datagen.dataset.run_jobs` for ``penetration_frames`` and ``deadline``),
+    merge the workers' manifests. Resumable: the manifest is merged even when the run is
+    interrupted, and a run killed outright leaves worker manifests the next run folds in.
+
+    With ``batch`` > 1 the sequences are simulated in a seeded random order after the
+    validation ones, so a run stopped by its deadline leaves a validation split and a spread
+    of garments, bodies and motions rather than the first ones."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     body = load_body_model()
     planned = plan_jobs(config, body)
     log.info("%d sequences planned", len(planned))
     simulated = _to_simulate(config, planned)
-    wanted, drape_failed = drape_pairs(simulated, out, config.sim, workers=workers)
+    wanted, drape_failed = drape_pairs(simulated, out, config.sim, workers=workers, batch=batch)
     # The fit attribute is fitted on the training pairs: draped where they are simulated, as
     # planned where simulate_splits or simulate_sequences leaves them out (a test set is never
     # trained on).
@@ -500,14 +546,18 @@ def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1)
     # interrupted still leaves a manifest ``cloth-usd evaluate`` reads.
     model, alphas = fit_training_pairs(jobs, body)
     model.save(out / "fit.npz")
+    if batch > 1:  # a seeded random order, the validation sequences first (a deadline never leaves none)
+        wanted = [wanted[i] for i in np.random.default_rng(config.seed).permutation(len(wanted))]
+        wanted.sort(key=lambda j: j.meta["split"] != "val")
     workers = max(1, min(workers, len(wanted)))
     names = [f"manifest.worker-{k}.json" for k in range(workers)]
-    parts = [(wanted[k::workers], out, config.sim, config.dataset, names[k]) for k in range(workers)]
+    parts = [(wanted[k::workers], out, config.sim, config.dataset, names[k], batch, penetration_frames, deadline)
+             for k in range(workers)]
     try:
         if workers == 1:
             _worker(parts[0])
         else:
-            with ProcessPoolExecutor(max_workers=workers) as pool:
+            with ProcessPoolExecutor(max_workers=workers, mp_context=_SPAWN) as pool:
                 list(pool.map(_worker, parts))
     finally:
         merged = _merge_worker_manifests(out)

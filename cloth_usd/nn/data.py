@@ -19,9 +19,11 @@ import dataclasses
 import enum
 import hashlib
 import logging
+import os
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Sequence
+from typing import TYPE_CHECKING, Iterable, Sequence
 
 import numpy as np
 
@@ -43,6 +45,9 @@ from ..core.pipeline import (
 )
 from ..core.scene import Category
 from ..errors import ArgumentError
+
+if TYPE_CHECKING:
+    from ..core.shards import Shard
 
 __all__ = ["Split", "TEST_SPLITS", "Clip", "DataSet", "load_dataset", "CoarseTarget", "with_coarse_target", "with_heading",
            "plan_batches", "CoarseExample", "DetailExample", "coarse_example", "detail_example", "Moments", "Statistics", "even_frames",
@@ -157,7 +162,7 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
     body = body if body is not None else load_body_model()
     fit = FitModel.load(root / FIT)
     pairs: dict[str, GarmentPair] = {}
-    clips = []
+    chosen = []
     for name in manifest.accepted:
         entry = manifest.sequences[name]
         split_name = entry.get("split") or entry.get("meta", {}).get("split")
@@ -168,29 +173,44 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
         except ValueError:
             log.warning("%s: sequence %s has unknown split %r, skipped", root, name, split_name)
             continue
-        if split not in wanted:
-            continue
+        if split in wanted:
+            chosen.append((name, entry, split))
+
+    def read(item: tuple) -> Shard:
         try:
-            shard = read_shard(root / entry["shard"])
+            return read_shard(root / item[1]["shard"])
         except DatasetError as exc:
             raise ArgumentError(str(exc)) from exc
-        rest = shard.garment_vertices.astype(np.float64)
-        key = _pair_key(rest, shard.garment_faces, shard.betas)
-        meta = dict(entry.get("meta", {}))
-        if key not in pairs:
-            pairs[key] = prepare_pair(body, shard.betas, rest, shard.garment_faces, fit,
-                                      category=meta.get("category", Category.TSHIRT.value))
-        w = warmup_frames(meta)  # the ease-in of a real clip: the garment still catching up
-        t = shard.positions.shape[0] if max_frames is None else min(w + max_frames, shard.positions.shape[0])
-        if w >= t:
-            log.warning("%s: sequence %s has no frames after its %d warm-up frames, skipped", root, name, w)
-            continue
-        clips.append(Clip(name=name, split=split, meta=meta, pair=pairs[key],
-                          rest_points=rest, positions=shard.positions[w:t], coarse=shard.coarse[w:t],
-                          poses=shard.poses[w:t], transl=shard.transl[w:t]))
+
+    clips = []
+    # Shards are read (and unzipped, which frees the GIL) a few at a time, in order.
+    with ThreadPoolExecutor(max_workers=max(1, min(8, os.cpu_count() or 1))) as pool:
+        for (name, entry, split), shard in zip(chosen, pool.map(read, chosen)):
+            clips.append(_clip(body, fit, pairs, root, name, entry, split, shard, max_frames))
+    clips = [c for c in clips if c is not None]
     log.info("%s: %d sequences, %d garment-body pairs", root, len(clips), len(pairs))
     return DataSet(root=root, manifest_sha256=file_sha256(root / MANIFEST), fit=fit, body=body,
                    clips=tuple(clips))
+
+
+def _clip(body: BodyModel, fit: FitModel, pairs: dict, root: Path, name: str, entry: dict, split: Split,
+          shard: Shard, max_frames: int | None) -> Clip | None:
+    """One sequence of :func:`load_dataset` (its pair prepared once, in ``pairs``), None when
+    nothing is left after its warm-up."""
+    rest = shard.garment_vertices.astype(np.float64)
+    key = _pair_key(rest, shard.garment_faces, shard.betas)
+    meta = dict(entry.get("meta", {}))
+    if key not in pairs:
+        pairs[key] = prepare_pair(body, shard.betas, rest, shard.garment_faces, fit,
+                                  category=meta.get("category", Category.TSHIRT.value))
+    w = warmup_frames(meta)  # the ease-in of a real clip: the garment still catching up
+    t = shard.positions.shape[0] if max_frames is None else min(w + max_frames, shard.positions.shape[0])
+    if w >= t:
+        log.warning("%s: sequence %s has no frames after its %d warm-up frames, skipped", root, name, w)
+        return None
+    return Clip(name=name, split=split, meta=meta, pair=pairs[key],
+                rest_points=rest, positions=shard.positions[w:t], coarse=shard.coarse[w:t],
+                poses=shard.poses[w:t], transl=shard.transl[w:t])
 
 
 def warmup_frames(meta: dict) -> int:
@@ -221,10 +241,17 @@ def with_coarse_target(data: DataSet, target: CoarseTarget | str) -> DataSet:
 
     if CoarseTarget(target) is CoarseTarget.STORED:
         return data
-    clips = tuple(dataclasses.replace(c, coarse=laplacian_smooth(c.positions, c.pair.faces, iterations=TAUBIN_PASSES,
-                                                                 lam=TAUBIN_LAMBDA, mu=TAUBIN_MU))
-                  for c in data.clips)
+    clips = _map_clips(lambda c: dataclasses.replace(c, coarse=laplacian_smooth(
+        c.positions, c.pair.faces, iterations=TAUBIN_PASSES, lam=TAUBIN_LAMBDA, mu=TAUBIN_MU)), data.clips)
     return dataclasses.replace(data, clips=clips)
+
+
+def _map_clips(fn, clips: Sequence[Clip]) -> tuple[Clip, ...]:
+    """``fn`` over the clips, in order, a few at a time (numpy and scipy free the GIL in their loops)."""
+    if len(clips) < 2:
+        return tuple(fn(c) for c in clips)
+    with ThreadPoolExecutor(max_workers=max(1, min(8, os.cpu_count() or 1))) as pool:
+        return tuple(pool.map(fn, clips))
 
 
 def with_heading(data: DataSet, heading: Heading | str) -> DataSet:
@@ -233,14 +260,13 @@ def with_heading(data: DataSet, heading: Heading | str) -> DataSet:
     body (:class:`~cloth_usd.core.heading.HeadingFrame`), as the runtime does."""
     if Heading(heading) is Heading.WORLD:
         return data
-    clips = []
-    for c in data.clips:
+    def turn(c: Clip) -> Clip:
         frame = heading_frame(c.poses, c.transl, c.pair.joints[0])
-        clips.append(dataclasses.replace(
-            c, poses=frame.canonical_poses(c.poses),
-            positions=frame.to_canonical(c.positions).astype(np.float32),
-            coarse=frame.to_canonical(c.coarse).astype(np.float32)))
-    return dataclasses.replace(data, clips=tuple(clips))
+        return dataclasses.replace(c, poses=frame.canonical_poses(c.poses),
+                                   positions=frame.to_canonical(c.positions).astype(np.float32),
+                                   coarse=frame.to_canonical(c.coarse).astype(np.float32))
+
+    return dataclasses.replace(data, clips=_map_clips(turn, data.clips))
 
 
 def even_frames(num_frames: int, count: int | None) -> np.ndarray:

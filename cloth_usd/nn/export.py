@@ -134,7 +134,7 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
                   out_dir: str | Path, *, name: str, category: str = "tshirt",
                   metrics: dict | None = None, description: str = "", parity_frames: int = 4,
                   tolerance: float = 1e-4, force: bool = False, body=None,
-                  mocap_dir: str | Path | None = None) -> Path:
+                  mocap_dir: str | Path | None = None, parity_data: str | Path | None = None) -> Path:
     """Export trained runs to ONNX and write a verified model bundle.
 
     The best-validation model of each run is exported (:func:`export_coarse`,
@@ -153,6 +153,9 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         metrics: evaluation metrics (``cloth-usd evaluate``'s ``metrics.json``) to record.
         description: one line about the training data.
         mocap_dir: for a physics run whose config names BVH motions, their folder.
+        parity_data: a data set folder whose sequences (every split) the parity check runs
+            on instead of ``data_dir``'s validation split: for runs whose data set stayed
+            where it was made (only its ``manifest.json`` and ``fit.npz`` came along).
     Returns:
         The bundle folder, loaded once through :func:`cloth_usd.runtime.load_bundle`.
     Raises:
@@ -169,7 +172,7 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
     from ..core.scene import Tier
     from ..errors import ArgumentError, ClothUsdError
     from ..runtime.bundle import load_bundle, write_bundle
-    from .data import FIT, Split, load_dataset
+    from .data import FIT, MANIFEST, Split, load_dataset
     from .config import CoarseInput
     from .runs import BEST, load_run
 
@@ -182,6 +185,9 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
     if detail is not None and detail.tier is not Tier.DETAIL:
         raise ArgumentError(f"--detail-run {detail_run}: is a {detail.tier.value} run")
     planned = ("physics", "hybrid")  # the data kinds of runs trained on a data set config's planned sequences
+    if coarse.info["data"].get("kind") in planned and parity_data is not None:
+        raise ArgumentError("--parity-data: only for runs trained on simulated data (these were trained on the "
+                            "physics or hybrid objective, whose data set config makes the parity data)")
     if coarse.info["data"].get("kind") in planned:
         from ..core.body import load_body_model
         from ..core.limits import betas_range_record, pose_range_record
@@ -199,6 +205,13 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         factory = load_config(data_dir, mocap_dir=mocap_dir)
         poses = pose_range_record(train_poses(factory, body))
         bodies = betas_range_record(train_betas(factory))
+    elif parity_data is not None:  # only the training data set's manifest and fit model are here
+        if not (data_dir / MANIFEST).is_file() or not (data_dir / FIT).is_file():
+            raise ArgumentError(f"--data {data_dir}: needs {MANIFEST} and {FIT} (of the data set the runs were "
+                                "trained on)")
+        data = load_dataset(parity_data, None, body=body, max_frames=parity_frames)
+        body, data_sha256, fit_npz = data.body, file_sha256(data_dir / MANIFEST), data_dir / FIT
+        poses = bodies = None
     else:  # a simulated data set records no poses here: the bake checks against JOINT_LIMITS
         data = load_dataset(data_dir, (Split.VAL,), body=body, max_frames=parity_frames)
         body, data_sha256, fit_npz, poses, bodies = data.body, data.manifest_sha256, data_dir / FIT, None, None
@@ -214,9 +227,12 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
             if detail.config.coarse_input is CoarseInput.PREDICTED:
                 raise ArgumentError(msg)
             log.warning("%s", msg)
-    clips = data.split(Split.VAL)
+    clips = data.clips if parity_data is not None else data.split(Split.VAL)
+    if not clips and parity_data is not None:
+        raise ArgumentError(f"--parity-data {parity_data}: no sequences for the export parity check")
     if not clips:
-        raise ArgumentError(f"--data {data_dir}: no validation sequences for the export parity check")
+        raise ArgumentError(f"--data {data_dir}: no validation sequences for the export parity check "
+                            "(--parity-data DIR checks on another data set's sequences)")
 
     def train_record(run) -> dict:
         return {**dataclasses.asdict(run.model.config), "train": {

@@ -187,6 +187,21 @@ def _step(model: torch.nn.Module, optimizer: torch.optim.Optimizer, loss: torch.
     return float(loss.detach())
 
 
+_FORMED: dict = {}
+"""The last data set :func:`_formed` made: ``(id, target, heading) -> (data, formed)``."""
+
+
+def _formed(data: DataSet, target, heading) -> DataSet:
+    """``data`` with its coarse target and heading applied, made once for a data set that
+    trains both tiers in one process (the latest one is kept; a data set is never changed)."""
+    key = (id(data), str(target), str(heading))
+    hit = _FORMED.get(key)
+    if hit is None or hit[0] is not data:
+        _FORMED.clear()
+        hit = _FORMED[key] = (data, with_heading(with_coarse_target(data, target), heading))
+    return hit[1]
+
+
 def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: TrainConfig = TrainConfig(), *,
           coarse_run: str | Path | None = None, device: str | None = "auto", resume: bool = False,
           body: BodyModel | None = None, dataset: DataSet | None = None,
@@ -230,7 +245,7 @@ def train(tier: Tier | str, data_dir: str | Path, run_dir: str | Path, config: T
     data = dataset if dataset is not None else load_dataset(
         data_dir, (Split.TRAIN, Split.VAL), body=body, max_frames=config.max_frames or None)
     form = (coarse.config if coarse is not None else config).coarse_form  # a detail run runs as its coarse run
-    data = with_heading(with_coarse_target(data, config.coarse_target), form.heading)
+    data = _formed(data, config.coarse_target, form.heading)
     train_clips, val_clips = data.split(Split.TRAIN), data.split(Split.VAL)
     if not train_clips:
         raise ArgumentError(f"--data {data_dir}: no accepted training sequences")

@@ -161,3 +161,51 @@ def test_a_worker_skips_what_an_interrupted_run_merged(tmp_path, body):
     again = FakeSim(unstable={50})
     run_jobs(jobs, tmp_path, cfg, body=body, simulator=again, manifest_name="manifest.worker-0.json")
     assert again.calls == []
+
+
+class FakeBatchSim:
+    """Stands in for simulate_batch: each member through FakeSim; records the batches' sizes and lengths."""
+
+    def __init__(self, unstable=()):
+        self.single, self.batches, self.penetration_frames = FakeSim(unstable), [], []
+
+    def __call__(self, body, items, config, *, penetration_frames=None):
+        self.batches.append([(it.garment_verts.shape[0], it.poses.shape[0]) for it in items])
+        self.penetration_frames.append(penetration_frames)
+        return [self.single(body, it.betas, it.garment_verts, it.garment_faces, it.poses, it.transl, config)
+                for it in items]
+
+
+def test_run_jobs_in_batches_groups_equal_lengths_and_rejects_each_member(tmp_path, body):
+    import dataclasses
+
+    jobs = _jobs(body)
+    longer = [dataclasses.replace(j, name=j.name + "-long", poses=np.zeros((6, 72)), transl=np.zeros((6, 3)))
+              for j in jobs[:2]]
+    sim = FakeBatchSim(unstable={50})
+    manifest = run_jobs(jobs + longer, tmp_path, SimConfig(substeps=2), body=body, batch=2,
+                        penetration_frames=3, batch_simulator=sim,
+                        simulator=lambda *a: pytest.fail("batch > 1 never simulates one at a time"))
+    # Two lengths, each in order, at most two a batch: no batch mixes 4- and 6-frame jobs.
+    assert sim.batches == [[(40, 4), (50, 4)], [(60, 4)], [(40, 6), (50, 6)]]
+    assert sim.penetration_frames == [3, 3, 3]
+    assert manifest.accepted == ["job0", "job0-long", "job2"]
+    assert manifest.rejected == ["job1", "job1-long"]  # an unstable member is rejected alone
+    assert read_shard(tmp_path / "job0-long.npz").positions.shape == (6, 40, 3)
+    again = FakeBatchSim()
+    run_jobs(jobs + longer, tmp_path, SimConfig(substeps=2), body=body, batch=2, batch_simulator=again)
+    assert again.batches == []  # resumable as one at a time is
+
+
+def test_run_jobs_starts_nothing_after_its_deadline(tmp_path, body):
+    import time
+
+    sim = FakeBatchSim()
+    manifest = run_jobs(_jobs(body), tmp_path, SimConfig(substeps=2), body=body, batch=2, batch_simulator=sim,
+                        deadline=time.time() - 1.0)
+    assert sim.batches == [] and manifest.accepted == [] and manifest.rejected == []
+    one = FakeSim()
+    run_jobs(_jobs(body), tmp_path, SimConfig(substeps=2), body=body, simulator=one, deadline=time.time() + 60.0)
+    assert one.calls == [40, 50, 60]  # a deadline not yet passed changes nothing
+    with pytest.raises(DatasetError, match="batch must be at least 1"):
+        run_jobs(_jobs(body), tmp_path, SimConfig(), body=body, batch=0)

@@ -115,11 +115,11 @@ def test_an_interrupted_run_leaves_a_merged_manifest_and_resumes(tmp_path, monke
     from cloth_usd.datagen.simulate import SimConfig
     from tests.datagen.test_dataset import FakeSim
 
-    monkeypatch.setattr(factory, "drape_pairs", lambda jobs, out, sim, workers=1: (jobs, {}))
+    monkeypatch.setattr(factory, "drape_pairs", lambda jobs, out, sim, workers=1, batch=1: (jobs, {}))
     calls = []
 
     def worker(args, stop_after=None):
-        jobs, out_dir, sim, dataset, name = args
+        jobs, out_dir, sim, dataset, name, *_ = args  # then batch, penetration frames, deadline
         fake = FakeSim()
         run_jobs(jobs[:stop_after], out_dir, SimConfig(**sim), dataset=DatasetConfig(**dataset),
                  manifest_name=name, simulator=fake)
@@ -166,10 +166,20 @@ def test_simulate_sequences_draws_part_of_the_plan(tmp_path, monkeypatch):
     assert chosen != [j.name for j in factory._to_simulate(other, plan_jobs(other))]
 
     draped, simulated = [], []
-    monkeypatch.setattr(factory, "drape_pairs", lambda jobs, out, sim, workers=1: (draped.extend(jobs), (jobs, {}))[1])
+    monkeypatch.setattr(factory, "drape_pairs",
+                        lambda jobs, out, sim, workers=1, batch=1: (draped.extend(jobs), (jobs, {}))[1])
     monkeypatch.setattr(factory, "_worker", lambda args: simulated.extend(args[0]))
     factory.run_factory(config, tmp_path / "data")
     assert [j.name for j in draped] == [j.name for j in simulated] == chosen
+
+    # In batches: the validation sequences first, then the others in an order drawn by the seed.
+    config = dataclasses.replace(config, simulate_splits=["train", "val"])
+    simulated.clear()
+    factory.run_factory(config, tmp_path / "batched", workers=1, batch=2)
+    chosen = [j.name for j in factory._to_simulate(config, plan_jobs(config))]
+    names = [j.name for j in simulated]
+    vals = [n for n in chosen if n.startswith("val.")]
+    assert sorted(names) == sorted(chosen) and vals and set(names[:len(vals)]) == set(vals) and names != chosen
 
     for bad in (5, {"train": 0}, {"train": 2.5}, {"train": True}, {"trian": 5}):
         with pytest.raises(ArgumentError, match="simulate_sequences"):

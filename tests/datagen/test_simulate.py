@@ -13,8 +13,8 @@ import pytest
 
 from cloth_usd.core.body import load_body_model, posed_vertices
 from cloth_usd.datagen import TShirtParams, make_tshirt, walk_cycle
-from cloth_usd.datagen.simulate import (SimConfig, SimulationError, edge_stretch, make_collider,
-                                        penetration_fraction, simulate, unique_edges)
+from cloth_usd.datagen.simulate import (SimConfig, SimItem, SimulationError, edge_stretch, make_collider,
+                                        penetration_fraction, simulate, simulate_batch, unique_edges)
 
 pytest.importorskip("newton", reason="cloth simulation needs newton (pip install newton==1.8.0)")
 
@@ -131,3 +131,35 @@ def test_style3d_needs_the_mesh_shape_collider_and_a_known_solver_name():
         SimConfig(solver="style3d", collider="cloth")
     with pytest.raises(SimulationError, match="vbd, style3d|'vbd', 'style3d'"):
         SimConfig(solver="xpbd")
+
+
+def test_a_batch_simulates_each_member_as_alone(scene, tiny_run):
+    """Two garments on two bodies in one model: each member's own world, so each moves as it does alone."""
+    body, betas, verts, faces, poses, root = scene
+    other_betas = np.r_[1.0, -0.5, np.zeros(8)]
+    other_verts, other_faces = make_tshirt(body, other_betas, TShirtParams(target_vertices=300))
+    alone = simulate(body, other_betas, other_verts, other_faces, poses, root, TINY)
+    both = simulate_batch(body, [SimItem(betas, verts, faces, poses, root),
+                                 SimItem(other_betas, other_verts, other_faces, poses, root)],
+                          TINY, penetration_frames=2)
+    for single, member in ((tiny_run, both[0]), (alone, both[1])):
+        assert member.is_stable and member.positions.shape == single.positions.shape
+        # Measured 0.5 mm after three frames: the model's colouring orders the solve differently.
+        assert np.abs(member.positions - single.positions).max() < 2e-3
+        # The penetration at the first and the last frame only; NaN between.
+        assert np.isnan(member.penetration[1:-1]).all() and np.isfinite(member.penetration[[0, -1]]).all()
+        np.testing.assert_allclose(member.penetration[-1], single.penetration[-1], atol=0.02)
+        assert member.quality()["penetration_max"] == pytest.approx(np.nanmax(member.penetration))
+
+
+def test_a_batch_refuses_what_it_cannot_simulate(scene):
+    body, betas, verts, faces, poses, root = scene
+    item = SimItem(betas, verts, faces, poses, root)
+    with pytest.raises(SimulationError, match="same number of frames"):
+        simulate_batch(body, [item, SimItem(betas, verts, faces, poses[:2], root[:2])], TINY)
+    with pytest.raises(SimulationError, match="mesh_shape"):
+        simulate_batch(body, [item, item], dataclasses.replace(TINY, collider="cloth"))
+    with pytest.raises(SimulationError, match="batch item 1: poses"):
+        simulate_batch(body, [item, SimItem(betas, verts, faces, poses[:, :10], root)], TINY)
+    with pytest.raises(SimulationError, match="at least one"):
+        simulate_batch(body, [], TINY)

@@ -262,3 +262,27 @@ def test_graph_tensor_cache_pins_its_graphs():
         del graph
         gc.collect()
     assert all(r() is not None for r in refs)
+
+
+def test_export_checks_parity_on_another_data_set_when_only_the_manifest_came_back(tmp_path_factory, capsys):
+    """Runs trained where their data set stayed (a GPU lease): --data holds only manifest.json and
+    fit.npz, so the parity check needs --parity-data; the bundle records the training data set."""
+    import shutil
+
+    from cloth_usd.cli import main
+    from cloth_usd.runtime import load_bundle
+
+    data, coarse, detail = tiny_runs(tmp_path_factory)
+    came_back = tmp_path_factory.mktemp("came-back")
+    for name in ("manifest.json", "fit.npz"):
+        shutil.copy(data / name, came_back / name)
+    out = tmp_path_factory.mktemp("bundles") / "b"
+    args = ["export", "--coarse-run", str(coarse), "--detail-run", str(detail), "--data", str(came_back),
+            "-o", str(out), "--name", "parity-elsewhere"]
+    assert main(args) == 2  # the manifest names validation shards that are not there
+    assert "unreadable shard" in capsys.readouterr().err
+    assert main(args + ["--parity-data", str(data)]) == 0
+    assert f"on the sequences of {data}" in capsys.readouterr().out
+    manifest = load_bundle(out).manifest
+    assert manifest["training_data"]["manifest_sha256"] == load_dataset(data, (Split.VAL,)).manifest_sha256
+    assert manifest["metrics"]["export_parity"]["sequences"] > len(load_dataset(data, (Split.VAL,)).clips)
