@@ -7,7 +7,9 @@ validation shards). It runs the same on the CPU, only slower.
 1. ``cloth-usd datagen CONFIG --batch K --workers W --max-minutes SIM`` (a process of its own).
 2. The data set is loaded once, then ``train coarse`` and ``train detail`` (predicted coarse
    input) run on it in turn; each stops after the first epoch that ends past its minutes (the
-   best epoch so far is the run's model, as always).
+   best epoch so far is the run's model, as always). A training config whose ``objective`` is
+   ``hybrid`` trains on the datagen config's energy plus the simulated frames instead
+   (``cloth-usd train --objective hybrid --data CONFIG --sim-data DATA``).
 3. ``--pack DIR``: ``runs.tar`` (both runs), ``data.tar`` (manifest.json, fit.npz, the
    validation shards: what ``cloth-usd export --data`` reads) and ``summary.json``.
 
@@ -52,11 +54,12 @@ def simulate(args: argparse.Namespace) -> float:
 
 def train_tier(tier: str, dataset, args: argparse.Namespace, config_path: str, minutes: float,
                coarse_run: Path | None) -> dict:
-    """Train one tier on the loaded data set until its minutes are spent; returns its summary."""
-    from cloth_usd.nn.config import TrainConfig
+    """Train one tier on the loaded data set (supervised) or on the datagen config's energy plus
+    the simulated frames (hybrid) until its minutes are spent; returns its summary."""
+    from cloth_usd.nn.physics_train import load_physics_config, train_physics
     from cloth_usd.nn.train import train
 
-    config = TrainConfig.from_mapping(json.loads(Path(config_path).read_text()), config_path)
+    config, options = load_physics_config(config_path)
     run_dir = Path(args.runs) / tier
     deadline = time.time() + 60.0 * minutes
     history = []
@@ -69,8 +72,12 @@ def train_tier(tier: str, dataset, args: argparse.Namespace, config_path: str, m
 
     began = time.time()
     try:
-        train(tier, args.data, run_dir, config, coarse_run=coarse_run, device=args.device, dataset=dataset,
-              progress=progress)
+        if config.objective.value == "hybrid":
+            train_physics(args.config, run_dir, config, tier=tier, coarse_run=coarse_run, device=args.device,
+                          progress=progress, options=options, mocap_dir=args.mocap, sim_data=args.data)
+        else:
+            train(tier, args.data, run_dir, config, coarse_run=coarse_run, device=args.device, dataset=dataset,
+                  progress=progress)
         stopped = "epochs"
     except OutOfTime:
         stopped = "clock"
@@ -133,10 +140,13 @@ def main(argv: list[str] | None = None) -> int:
                             "seconds_per_frame_p10_p50_p90": [
                                 float(v) for v in np.percentile([float(q.get("seconds_per_frame", 0)) for q in quality]
                                                                 or [0.0], [10, 50, 90])]}
-    began = time.time()
-    dataset = load_dataset(args.data, (Split.TRAIN, Split.VAL))
-    summary["load_seconds"] = time.time() - began
-    log.info("loaded %d sequences in %.1f s", len(dataset.clips), summary["load_seconds"])
+    dataset = None
+    if any(json.loads(Path(c).read_text()).get("objective", "supervised") == "supervised"
+           for c in (args.coarse_config, args.detail_config)):
+        began = time.time()
+        dataset = load_dataset(args.data, (Split.TRAIN, Split.VAL))
+        summary["load_seconds"] = time.time() - began
+        log.info("loaded %d sequences in %.1f s", len(dataset.clips), summary["load_seconds"])
     summary["coarse"] = train_tier("coarse", dataset, args, args.coarse_config, args.coarse_minutes, None)
     summary["detail"] = train_tier("detail", dataset, args, args.detail_config, args.detail_minutes,
                                    Path(args.runs) / "coarse")
