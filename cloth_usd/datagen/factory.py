@@ -436,13 +436,14 @@ def _save_drape(path: Path, draped: np.ndarray, faces: np.ndarray, verts: np.nda
     tmp.replace(path)
 
 
-def _drape_batch(args: list[tuple], batch: int) -> list[tuple[str, str]]:
+def _drape_batch(args: list[tuple], batch: int, penetration_frames: int | None) -> list[tuple[str, str]]:
     """Drape the pairs of ``args`` (as :func:`_drape_worker` takes them) ``batch`` at a time,
     each chunk as one model (:func:`~cloth_usd.datagen.simulate.simulate_batch`)."""
     from .simulate import SimItem, simulate_batch
 
-    todo = [a for a in args if not _drape_path(a[4], a[0], a[1], a[2], a[3], a[5]).exists()]
-    done = [(a[0], "") for a in args if a not in todo]
+    cached = [_drape_path(a[4], a[0], a[1], a[2], a[3], a[5]).exists() for a in args]
+    todo = [a for a, c in zip(args, cached) if not c]
+    done = [(a[0], "") for a, c in zip(args, cached) if c]
     if not todo:
         return done
     config = SimConfig(**todo[0][5])
@@ -452,7 +453,8 @@ def _drape_batch(args: list[tuple], batch: int) -> list[tuple[str, str]]:
         chunk = todo[i:i + batch]
         items = [SimItem(b, v, f, np.zeros((frames, 72)), np.zeros((frames, 3))) for _, v, f, b, _, _ in chunk]
         log.info("draping %d pairs as one model", len(chunk))
-        for (key, verts, faces, betas, out_dir, sim), result in zip(chunk, simulate_batch(body, items, config)):
+        results = simulate_batch(body, items, config, penetration_frames=penetration_frames)
+        for (key, verts, faces, betas, out_dir, sim), result in zip(chunk, results):
             if not result.is_stable:
                 done.append((key, f"drape unstable: {result.failure}"))
                 continue
@@ -479,16 +481,17 @@ def _drape_worker(args: tuple) -> tuple[str, str]:
 
 
 def drape_pairs(jobs: list[Job], out_dir: str | Path, sim: dict, *, workers: int = 1,
-                batch: int = 1) -> tuple[list[Job], dict]:
+                batch: int = 1, penetration_frames: int | None = None) -> tuple[list[Job], dict]:
     """Drape every garment-body pair once (cached in ``out_dir/drape``) and put the draped
     garment into its jobs. Pairs whose drape went unstable are dropped, with their reason.
-    With ``batch`` > 1 the pairs are draped that many at a time as one model, in this process."""
+    With ``batch`` > 1 the pairs are draped that many at a time as one model, in this process
+    (their penetration measured at ``penetration_frames`` frames, as a batch's sequences)."""
     pairs = {}
     for job in jobs:
         pairs.setdefault(_pair(job), (job.garment_vertices, job.garment_faces, job.betas))
     args = [(k, v, f, b, str(out_dir), sim) for k, (v, f, b) in pairs.items()]
     if batch > 1 and len(args) > 1:
-        done = _drape_batch(args, batch)
+        done = _drape_batch(args, batch, penetration_frames)
     elif workers > 1 and len(args) > 1:
         with ProcessPoolExecutor(max_workers=min(workers, len(args)), mp_context=_SPAWN) as pool:
             done = list(pool.map(_drape_worker, args))
@@ -535,7 +538,8 @@ def run_factory(config: FactoryConfig, out_dir: str | Path, *, workers: int = 1,
     planned = plan_jobs(config, body)
     log.info("%d sequences planned", len(planned))
     simulated = _to_simulate(config, planned)
-    wanted, drape_failed = drape_pairs(simulated, out, config.sim, workers=workers, batch=batch)
+    wanted, drape_failed = drape_pairs(simulated, out, config.sim, workers=workers, batch=batch,
+                                       penetration_frames=penetration_frames)
     # The fit attribute is fitted on the training pairs: draped where they are simulated, as
     # planned where simulate_splits or simulate_sequences leaves them out (a test set is never
     # trained on).

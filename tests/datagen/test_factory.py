@@ -115,7 +115,7 @@ def test_an_interrupted_run_leaves_a_merged_manifest_and_resumes(tmp_path, monke
     from cloth_usd.datagen.simulate import SimConfig
     from tests.datagen.test_dataset import FakeSim
 
-    monkeypatch.setattr(factory, "drape_pairs", lambda jobs, out, sim, workers=1, batch=1: (jobs, {}))
+    monkeypatch.setattr(factory, "drape_pairs", lambda jobs, out, sim, **_: (jobs, {}))
     calls = []
 
     def worker(args, stop_after=None):
@@ -167,7 +167,7 @@ def test_simulate_sequences_draws_part_of_the_plan(tmp_path, monkeypatch):
 
     draped, simulated = [], []
     monkeypatch.setattr(factory, "drape_pairs",
-                        lambda jobs, out, sim, workers=1, batch=1: (draped.extend(jobs), (jobs, {}))[1])
+                        lambda jobs, out, sim, **_: (draped.extend(jobs), (jobs, {}))[1])
     monkeypatch.setattr(factory, "_worker", lambda args: simulated.extend(args[0]))
     factory.run_factory(config, tmp_path / "data")
     assert [j.name for j in draped] == [j.name for j in simulated] == chosen
