@@ -50,6 +50,7 @@ __all__ = [
     "simulate_batch",
     "SimItem",
     "drape",
+    "drape_batch",
     "penetration_fraction",
     "body_side",
     "edge_stretch",
@@ -775,8 +776,17 @@ def simulate_batch(body: BodyModel, items: list[SimItem], config: SimConfig = Si
     edge_start = np.cumsum([0] + [m.edges.shape[0] for m in members])[:-1]
     rest_len = np.maximum(np.linalg.norm(rest_all[edges_all[:, 1]] - rest_all[edges_all[:, 0]], axis=1), 1e-12)
 
+    def stretch_of(q: np.ndarray) -> np.ndarray:
+        """(members,) each member's largest edge length over its rest length (inf where not finite)."""
+        q64 = q.astype(np.float64)
+        with np.errstate(invalid="ignore", over="ignore"):
+            ratio = np.linalg.norm(q64[edges_all[:, 1]] - q64[edges_all[:, 0]], axis=1) / rest_len
+        return np.maximum.reduceat(np.where(np.isfinite(ratio), ratio, np.inf), edge_start)
+
     count = len(members)
     positions = [[m.rest.astype(np.float32)] for m in members]
+    rest_stretch = stretch_of(np.concatenate([p[0] for p in positions]))
+    stretches = [[float(rest_stretch[k])] for k in range(count)]
     nan = [[False] for _ in members]
     stable = [[True] for _ in members]
     speed = [[0.0] for _ in members]
@@ -805,11 +815,7 @@ def simulate_batch(body: BodyModel, items: list[SimItem], config: SimConfig = Si
             one_frame()
         q = states[0].particle_q.numpy()[:num_n].astype(np.float32)  # one sync per frame
         times.append(time.perf_counter() - start)
-        q64 = q.astype(np.float64)
-        with np.errstate(invalid="ignore", over="ignore"):
-            ratio = np.linalg.norm(q64[edges_all[:, 1]] - q64[edges_all[:, 0]], axis=1) / rest_len
-        ratio = np.where(np.isfinite(ratio), ratio, np.inf)
-        stretch = np.maximum.reduceat(ratio, edge_start)
+        stretch = stretch_of(q)
         for k, m in enumerate(members):
             if not running[k]:
                 continue
@@ -818,6 +824,7 @@ def simulate_batch(body: BodyModel, items: list[SimItem], config: SimConfig = Si
             move = (float(np.max(np.linalg.norm(qk.astype(np.float64) - positions[k][-1], axis=1)))
                     if finite else np.inf)
             positions[k].append(qk)
+            stretches[k].append(float(stretch[k]))
             nan[k].append(not finite)
             speed[k].append(move * config.fps)
             ok = finite and move <= max_move and stretch[k] <= config.max_stretch
@@ -846,7 +853,7 @@ def simulate_batch(body: BodyModel, items: list[SimItem], config: SimConfig = Si
             pen[t] = penetration_fraction(pos[t], m.body_full[t], body.faces)
         results.append(SimResult(
             positions=pos, nan=np.asarray(nan[k]), penetration=pen,
-            max_stretch=edge_stretch(pos.astype(np.float64), m.rest, m.edges),
+            max_stretch=np.asarray(stretches[k], dtype=np.float64),
             max_speed=np.asarray(speed[k], dtype=np.float64), stable=np.asarray(stable[k]),
             frames_requested=num_t, failure=failure[k], device=device, seconds_per_frame=spf))
     return results
@@ -867,9 +874,17 @@ def drape(body: BodyModel, betas: np.ndarray, garment_verts: np.ndarray, garment
     Raises:
         SimulationError: the drape went unstable (its failure is in the message).
     """
-    frames = max(1, config.drape_frames) + 1
-    result = simulate(body, betas, garment_verts, garment_faces, np.zeros((frames, 72)), np.zeros((frames, 3)),
-                      config)
+    (result,) = drape_batch(body, [(betas, garment_verts, garment_faces)], config)
     if not result.is_stable:
         raise SimulationError(f"drape unstable: {result.failure}")
     return result.positions[-1].astype(np.float64), result
+
+
+def drape_batch(body: BodyModel, garments: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+                config: SimConfig = SimConfig(), *, penetration_frames: int | None = None) -> list[SimResult]:
+    """:func:`drape` several garment-body pairs ``(betas, garment_verts, garment_faces)`` as
+    one model (:func:`simulate_batch`); a stable result's last frame is its draped garment."""
+    frames = max(1, config.drape_frames) + 1
+    rest = np.zeros((frames, 72)), np.zeros((frames, 3))
+    return simulate_batch(body, [SimItem(b, v, f, *rest) for b, v, f in garments], config,
+                          penetration_frames=penetration_frames)
