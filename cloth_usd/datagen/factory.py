@@ -438,8 +438,8 @@ def _save_drape(path: Path, draped: np.ndarray, faces: np.ndarray, verts: np.nda
 
 def _drape_batch(args: list[tuple], batch: int, penetration_frames: int | None) -> list[tuple[str, str]]:
     """Drape the pairs of ``args`` (as :func:`_drape_worker` takes them) ``batch`` at a time,
-    each chunk as one model (:func:`~cloth_usd.datagen.simulate.simulate_batch`)."""
-    from .simulate import SimItem, simulate_batch
+    each chunk as one model (:func:`~cloth_usd.datagen.simulate.drape_batch`)."""
+    from .simulate import drape_batch
 
     cached = [_drape_path(a[4], a[0], a[1], a[2], a[3], a[5]).exists() for a in args]
     todo = [a for a, c in zip(args, cached) if not c]
@@ -447,13 +447,12 @@ def _drape_batch(args: list[tuple], batch: int, penetration_frames: int | None) 
     if not todo:
         return done
     config = SimConfig(**todo[0][5])
-    frames = max(1, config.drape_frames) + 1
     body = load_body_model()
     for i in range(0, len(todo), batch):
         chunk = todo[i:i + batch]
-        items = [SimItem(b, v, f, np.zeros((frames, 72)), np.zeros((frames, 3))) for _, v, f, b, _, _ in chunk]
         log.info("draping %d pairs as one model", len(chunk))
-        results = simulate_batch(body, items, config, penetration_frames=penetration_frames)
+        results = drape_batch(body, [(b, v, f) for _, v, f, b, _, _ in chunk], config,
+                              penetration_frames=penetration_frames)
         for (key, verts, faces, betas, out_dir, sim), result in zip(chunk, results):
             if not result.is_stable:
                 done.append((key, f"drape unstable: {result.failure}"))
