@@ -182,11 +182,9 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
         except DatasetError as exc:
             raise ArgumentError(str(exc)) from exc
 
-    clips = []
-    # Shards are read (and unzipped, which frees the GIL) a few at a time, in order.
-    with ThreadPoolExecutor(max_workers=max(1, min(8, os.cpu_count() or 1))) as pool:
-        for (name, entry, split), shard in zip(chosen, pool.map(read, chosen)):
-            clips.append(_clip(body, fit, pairs, root, name, entry, split, shard, max_frames))
+    # Shards are read (and unzipped, which frees the GIL) a few at a time; pairs are prepared in order.
+    clips = [_clip(body, fit, pairs, root, name, entry, split, shard, max_frames)
+             for (name, entry, split), shard in zip(chosen, _in_threads(read, chosen))]
     clips = [c for c in clips if c is not None]
     log.info("%s: %d sequences, %d garment-body pairs", root, len(clips), len(pairs))
     return DataSet(root=root, manifest_sha256=file_sha256(root / MANIFEST), fit=fit, body=body,
@@ -241,17 +239,18 @@ def with_coarse_target(data: DataSet, target: CoarseTarget | str) -> DataSet:
 
     if CoarseTarget(target) is CoarseTarget.STORED:
         return data
-    clips = _map_clips(lambda c: dataclasses.replace(c, coarse=laplacian_smooth(
+    clips = _in_threads(lambda c: dataclasses.replace(c, coarse=laplacian_smooth(
         c.positions, c.pair.faces, iterations=TAUBIN_PASSES, lam=TAUBIN_LAMBDA, mu=TAUBIN_MU)), data.clips)
     return dataclasses.replace(data, clips=clips)
 
 
-def _map_clips(fn, clips: Sequence[Clip]) -> tuple[Clip, ...]:
-    """``fn`` over the clips, in order, a few at a time (numpy and scipy free the GIL in their loops)."""
-    if len(clips) < 2:
-        return tuple(fn(c) for c in clips)
+def _in_threads(fn, items: Sequence) -> tuple:
+    """``fn`` over ``items``, in order, a few at a time (unzipping, numpy and scipy free the GIL
+    in their loops)."""
+    if len(items) < 2:
+        return tuple(fn(i) for i in items)
     with ThreadPoolExecutor(max_workers=max(1, min(8, os.cpu_count() or 1))) as pool:
-        return tuple(pool.map(fn, clips))
+        return tuple(pool.map(fn, items))
 
 
 def with_heading(data: DataSet, heading: Heading | str) -> DataSet:
@@ -260,13 +259,14 @@ def with_heading(data: DataSet, heading: Heading | str) -> DataSet:
     body (:class:`~cloth_usd.core.heading.HeadingFrame`), as the runtime does."""
     if Heading(heading) is Heading.WORLD:
         return data
+
     def turn(c: Clip) -> Clip:
         frame = heading_frame(c.poses, c.transl, c.pair.joints[0])
         return dataclasses.replace(c, poses=frame.canonical_poses(c.poses),
                                    positions=frame.to_canonical(c.positions).astype(np.float32),
                                    coarse=frame.to_canonical(c.coarse).astype(np.float32))
 
-    return dataclasses.replace(data, clips=_map_clips(turn, data.clips))
+    return dataclasses.replace(data, clips=_in_threads(turn, data.clips))
 
 
 def even_frames(num_frames: int, count: int | None) -> np.ndarray:
