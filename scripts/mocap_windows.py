@@ -50,11 +50,12 @@ def _without_glitches(motions: list[dict], base: dict, root: Path) -> tuple[list
     import numpy as np
 
     from cloth_usd.core.body import load_body_model, shape_body
-    from cloth_usd.datagen.factory import load_config, _motion
+    from cloth_usd.datagen.factory import FactoryConfig, _motion
     from cloth_usd.errors import ClothUsdError
 
     body = load_body_model()
-    config = load_config_from(base, root, load_config)
+    # What a motion is read with: the clips' folder and the base's frame limit.
+    config = FactoryConfig(mocap_dir=str(root), max_frames=base.get("max_frames"))
     joints = shape_body(body, np.zeros(1))[1]
     kept, dropped = [], []
     for i, m in enumerate(motions):
@@ -65,16 +66,6 @@ def _without_glitches(motions: list[dict], base: dict, root: Path) -> tuple[list
             continue
         kept.append(m)
     return kept, dropped
-
-
-def load_config_from(base: dict, root: Path, load_config):
-    """The factory config of ``base`` (through a temporary file: the loader validates it)."""
-    import tempfile
-
-    with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "base.json"
-        path.write_text(json.dumps(base))
-        return load_config(path, mocap_dir=root)
 
 
 def main(argv: list[str] | None = None) -> int:
