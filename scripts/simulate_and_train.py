@@ -57,6 +57,7 @@ def train_tier(tier: str, dataset, args: argparse.Namespace, config_path: str, m
     """Train one tier on the loaded data set (supervised) or on the datagen config's energy plus
     the simulated frames (hybrid) until its minutes are spent; returns its summary."""
     from cloth_usd.nn.physics_train import load_physics_config, train_physics
+    from cloth_usd.nn.runs import load_run
     from cloth_usd.nn.train import train
 
     config, options = load_physics_config(config_path)
@@ -83,7 +84,8 @@ def train_tier(tier: str, dataset, args: argparse.Namespace, config_path: str, m
         stopped = "clock"
     if not history:
         raise SystemExit(f"{tier}: no epoch finished")
-    best = min(history, key=lambda r: r.val_loss)
+    # The run's own best (best.pt: the validation loss, or the training loss without validation).
+    best = next(r for r in history if r.epoch == load_run(run_dir).epoch)
     return {"run": str(run_dir), "epochs": len(history), "stopped_by": stopped, "seconds": time.time() - began,
             "best_epoch": best.epoch, "best_val_mm": best.val_mm,
             "val_mm": [r.val_mm for r in history], "epoch_seconds": [r.seconds for r in history]}
