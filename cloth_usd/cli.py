@@ -139,6 +139,10 @@ def _parser() -> argparse.ArgumentParser:
     tr.add_argument("--device", default="auto", help="auto (default: cuda when available), cpu or cuda")
     tr.add_argument("--epochs", type=int, help="total epochs (overrides the config; also when resuming)")
     tr.add_argument("--resume", action="store_true", help="continue the run in --out after its last epoch")
+    tr.add_argument("--init", metavar="RUN",
+                    help="physics or hybrid: start from this trained run's best model (same tier and width; e.g. "
+                         "one trained supervised where its simulated data stayed) instead of a fresh one; the "
+                         "config's physics.anchor_weight keeps the result near it")
     tr.add_argument("--mocap", metavar="DIR", help="physics: the folder the data config's BVH motions are relative "
                                                   "to (default: the config's mocap_dir, else $CLOTH_USD_MOCAP)")
     tr.add_argument("--threads", type=int, help="torch CPU threads (default: torch's)")
@@ -429,6 +433,9 @@ def _train(args: argparse.Namespace) -> int:
     if not physics and options != PhysicsOptions():
         raise ArgumentError(f"--config {config_path}: its \"physics\" table applies to --objective physics or "
                             "hybrid only")
+    if args.init and not physics:
+        raise ArgumentError("--init: only a physics or hybrid run starts from a trained run (a supervised run "
+                            "continues its own with --resume)")
     if args.mocap and not physics:
         raise ArgumentError("--mocap: only a physics run reads motions (a supervised run reads simulated data)")
     if hybrid != (args.sim_data is not None):
@@ -439,6 +446,8 @@ def _train(args: argparse.Namespace) -> int:
     mm = ("mm from skinning" if args.tier == "coarse" else "mm from the coarse garment") if physics else "mm"
     if hybrid:
         mm = "mm from the simulation" + ("'s coarse target" if args.tier == "coarse" else "")
+    elif physics and options.anchor_weight:
+        mm = "mm from the initial run's garment"
 
     def show(r) -> None:
         sys.stdout.write(f"epoch {r.epoch + 1}/{config.epochs}: train {r.train_loss:.4g}, val {r.val_loss:.4g} "
@@ -453,7 +462,7 @@ def _train(args: argparse.Namespace) -> int:
                                 "new --out")
         result = train_physics(args.data, args.out, config, tier=args.tier, coarse_run=coarse_run,
                                device=args.device, body=_body(args.body_model), progress=show, options=options,
-                               mocap_dir=args.mocap, sim_data=args.sim_data)
+                               mocap_dir=args.mocap, sim_data=args.sim_data, init_run=args.init)
     else:
         result = train(args.tier, args.data, args.out, config, coarse_run=coarse_run, device=args.device,
                        resume=args.resume, body=_body(args.body_model), progress=show)

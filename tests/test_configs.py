@@ -84,3 +84,19 @@ def test_the_experiment_configs_change_one_thing_from_what_they_measure_against(
     assert not {m.get("bvh") for m in motions} & held_out
     assert more.pop("bodies") == bodies
     assert more == {k: v for k, v in base.items() if k != "train_motions"}
+
+
+def test_the_fine_tune_configs_start_from_the_gpu_runs():
+    """``cloth-usd train --init`` needs the initial run's width and coarse form: the fine-tune
+    configs of ``tshirt-sim2`` are those of the GPU runs they start from (``train_*_gpu.json``)."""
+    pytest.importorskip("torch")
+    from cloth_usd.nn.physics_train import load_physics_config
+    from cloth_usd.nn.train import load_train_config
+
+    for tier in ("coarse", "detail"):
+        config, options = load_physics_config(CONFIGS / f"train_{tier}_finetune_sim.json")
+        gpu = load_train_config(CONFIGS / f"train_{tier}_gpu.json")
+        assert config.objective.value == "physics" and options.anchor_weight == 1.0e7
+        assert (config.width, config.decompose, config.use_parser) == (gpu.width, gpu.decompose, gpu.use_parser)
+        if tier == "coarse":
+            assert config.coarse_form == gpu.coarse_form

@@ -197,9 +197,13 @@ def export_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_di
         if detail is not None and detail.info["data"].get("kind") not in planned:
             raise ArgumentError(f"--detail-run {detail_run}: trained on simulated data, the coarse run on a data set "
                                 "config (physics or hybrid); a bundle's two runs share their data")
+        from ..core.fit import FitModel
+
         body = body if body is not None else load_body_model()
+        # the run's own fit attribute model: the config's, or an initial run's (cloth-usd train --init)
         data = physics_set(data_dir, body, heading=coarse.config.heading, splits=(Split.VAL,),
-                           max_frames=parity_frames, mocap_dir=mocap_dir)
+                           max_frames=parity_frames, mocap_dir=mocap_dir,
+                           fit=FitModel.load(coarse.path / PHYSICS_FIT))
         data_sha256, fit_npz = data.config_sha256, coarse.path / PHYSICS_FIT
         # the joint angles the runs saw, which a bake of a learned tier checks a shot against
         factory = load_config(data_dir, mocap_dir=mocap_dir)

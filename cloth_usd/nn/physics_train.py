@@ -55,6 +55,7 @@ included; the warm-up is never ``t``). Validation reports the energy as for phys
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import enum
 import json
@@ -144,6 +145,14 @@ class PhysicsOptions:
     contact: ContactPoints = ContactPoints.NEAREST
     """Which body point each garment vertex's contact is measured against
     (:class:`ContactPoints`)."""
+    anchor_weight: float = 0.0
+    """Only with an initial run (``cloth-usd train --init``) [1/s^2]: adds
+    ``anchor_weight / 2 * sum_n m_n |x_n - x0_n|^2`` [J] at every frame ``t``, ``x0`` the
+    initial run's own garment for the same inputs (the hybrid objective's spring, pulling
+    toward the model the run started from instead of toward a simulation). It keeps what the
+    initial model learned (from simulated frames that stayed on the machine that made them)
+    while the energy takes out what is not cloth in it: the body inside the garment and
+    stretched triangles. 0: the physics objective alone from the initial weights."""
 
     def __post_init__(self) -> None:
         try:
@@ -158,6 +167,8 @@ class PhysicsOptions:
             raise ArgumentError(f"PhysicsOptions.friction_epsilon must be > 0 [m/s], got {self.friction_epsilon!r}")
         if self.friction and not self.dynamic:
             raise ArgumentError("PhysicsOptions.friction needs dynamic: true (friction acts over a time step)")
+        if not (isinstance(self.anchor_weight, (int, float)) and self.anchor_weight >= 0):
+            raise ArgumentError(f"PhysicsOptions.anchor_weight must be >= 0 [1/s^2], got {self.anchor_weight!r}")
 
     @property
     def window(self) -> tuple[int, ...]:
@@ -249,7 +260,8 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
                 splits: Sequence[Split | str] | None = None, max_frames: int | None = None,
                 bending_scale: float = 1.0, contact_margin: float | None = None,
                 mocap_dir: str | Path | None = None,
-                sim_data: str | Path | None = None, sim_target: CoarseTarget | str | None = None) -> PhysicsSet:
+                sim_data: str | Path | None = None, sim_target: CoarseTarget | str | None = None,
+                fit: FitModel | None = None) -> PhysicsSet:
     """Plan a data set config's sequences (no simulation) for the physics objective.
 
     Args:
@@ -266,6 +278,8 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
             holds (status ``ok``) gets its :attr:`PhysicsClip.target` (the hybrid objective).
         sim_target: the target made from the simulation: a coarse target
             (:class:`~cloth_usd.nn.data.CoarseTarget`), or the simulation itself when None.
+        fit: the fit attribute model (an initial run's); None fits one on the config's training
+            pairs as planned.
     Raises:
         ArgumentError: ``sim_data`` is not a data set of this config (one line naming it).
     """
@@ -277,7 +291,8 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
     body = body if body is not None else load_body_model()
     factory = load_config(config_path, mocap_dir=mocap_dir)
     jobs = plan_jobs(factory, body)
-    fit, _ = fit_training_pairs(jobs, body)
+    if fit is None:
+        fit, _ = fit_training_pairs(jobs, body)
     base = Material.from_sim_config(SimConfig(**factory.sim))
     material = dataclasses.replace(base, bend_stiffness=base.bend_stiffness * bending_scale)
     if contact_margin is not None:
@@ -567,15 +582,45 @@ def _terms(clip: PhysicsClip, x: torch.Tensor, win: _Window, material: Material,
     return terms
 
 
+def _spring(clip: PhysicsClip, x_t: torch.Tensor, y: torch.Tensor, weight: float) -> torch.Tensor:
+    """(B,) ``weight / 2 * sum_n m_n |x_n - y_n|^2`` [J] of garments ``x_t`` (B, N, 3) [m]
+    against ``y`` (B, N, 3) [m], ``m_n`` the clip's vertex masses, ``weight`` [1/s^2]."""
+    masses = clip.rest.masses.to(x_t)
+    return 0.5 * weight * (masses * ((x_t - y.to(x_t)) ** 2).sum(-1)).sum(-1)
+
+
 def _supervised(clip: PhysicsClip, x_t: torch.Tensor, t: np.ndarray, weight: float) -> torch.Tensor | None:
     """(B,) the hybrid objective's supervised term [J] at frames ``t`` (B,) of garments
-    ``x_t`` (B, N, 3) [m]: ``weight / 2 * sum_n m_n |x_n - y_n|^2``, ``y`` the clip's
-    :attr:`~PhysicsClip.target`, ``weight`` [1/s^2]; None for a clip without one."""
+    ``x_t`` (B, N, 3) [m]: :func:`_spring` toward the clip's :attr:`~PhysicsClip.target`;
+    None for a clip without one."""
     if clip.target is None:
         return None
-    y = torch.from_numpy(clip.target[np.asarray(t, dtype=np.int64)]).to(x_t)
-    masses = clip.rest.masses.to(x_t)
-    return 0.5 * weight * (masses * ((x_t - y) ** 2).sum(-1)).sum(-1)
+    return _spring(clip, x_t, torch.from_numpy(clip.target[np.asarray(t, dtype=np.int64)]), weight)
+
+
+@dataclass(frozen=True)
+class _Anchor:
+    """:attr:`PhysicsOptions.anchor_weight`'s spring toward the initial run's garment."""
+
+    model: torch.nn.Module
+    """The initial run's model, frozen."""
+    weight: float
+    """[1/s^2]."""
+
+    def garment(self, step: "_Tier", clip: PhysicsClip, win: "_Window") -> torch.Tensor:
+        """(B, N, 3) the initial model's garment [m] at the window's frames t."""
+        with torch.no_grad():
+            return step.forward(self.model, clip, _rows(win.inputs, win.index[-1]))
+
+    def term(self, clip: PhysicsClip, x_t: torch.Tensor, x0: torch.Tensor) -> torch.Tensor:
+        """(B,) the spring [J] of garments ``x_t`` toward :meth:`garment` ``x0``."""
+        return _spring(clip, x_t, x0, self.weight)
+
+
+def _rows(inputs: _Inputs, rows: np.ndarray) -> _Inputs:
+    """``inputs`` of the frames ``rows`` only."""
+    values = (getattr(inputs, f.name) for f in dataclasses.fields(inputs))
+    return _Inputs(*(None if value is None else value[rows] for value in values))
 
 
 @dataclass(frozen=True)
@@ -589,6 +634,10 @@ class _Validation:
     """Hybrid: the supervised term's mean per window [J] (0 on windows without a target)."""
     sim_mm: float = math.nan
     """Hybrid: the mean distance [mm] to the target over the windows that have one (NaN: none)."""
+    anchor: float = 0.0
+    """With an anchor: its spring's mean per window [J]."""
+    anchor_mm: float = math.nan
+    """With an anchor: the mean distance [mm] from the initial run's garment (NaN: no anchor)."""
 
     @property
     def relative(self) -> float:
@@ -597,18 +646,20 @@ class _Validation:
 
 
 def _validate(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainConfig, material: Material,
-              options: PhysicsOptions = PhysicsOptions(), weight: float | None = None) -> _Validation:
+              options: PhysicsOptions = PhysicsOptions(), weight: float | None = None,
+              anchor: _Anchor | None = None) -> _Validation:
     """The objective on the validation windows, for the model's garment and its base (the
     skinned garment for the coarse tier, the coarse model's for the detail tier; dynamic: each
     with its own history), and the mean distance between them at frame t. ``weight`` (the
-    hybrid objective's, None: physics) adds the supervised term and the distance to the target."""
+    hybrid objective's, None: physics) adds the supervised term and the distance to the target;
+    ``anchor`` its spring and the distance to the initial run's garment."""
     names = (*TERMS, "total")
     if not clips:
         nan = {name: math.nan for name in names}
         return _Validation(nan, dict(nan), math.nan, math.nan if weight is not None else 0.0)
     model.eval()
     sums = {"model": dict.fromkeys(names, 0.0), "base": dict.fromkeys(names, 0.0)}
-    dist = supervised = sim_dist = 0.0
+    dist = supervised = sim_dist = spring = anchor_dist = 0.0
     count = vertices = sim_vertices = 0
     with torch.no_grad():
         for k, t in window_batches(clips, config.batch, frames=config.val_frames or None, window=options.window):
@@ -629,21 +680,29 @@ def _validate(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainCon
                 y = torch.from_numpy(clip.target[np.asarray(t, dtype=np.int64)]).to(x)
                 sim_dist += float(torch.linalg.vector_norm(x[now] - y, dim=-1).sum())
                 sim_vertices += len(t) * x.shape[1]
+            if anchor is not None:
+                x0 = anchor.garment(step, clip, win).cpu()
+                spring += float(anchor.term(clip, x[now], x0).sum())
+                anchor_dist += float(torch.linalg.vector_norm(x[now] - x0, dim=-1).sum())
     if not count:
         raise ArgumentError(f"no validation window: every validation clip is shorter than {len(options.window)} "
                             "frames (after its warm-up)")
     mean = {who: {name: v / count for name, v in terms.items()} for who, terms in sums.items()}
     return _Validation(mean["model"], mean["base"], dist / vertices * 1000.0, supervised / count,
-                       sim_dist / sim_vertices * 1000.0 if sim_vertices else math.nan)
+                       sim_dist / sim_vertices * 1000.0 if sim_vertices else math.nan, spring / count,
+                       anchor_dist / vertices * 1000.0 if anchor is not None else math.nan)
 
 
-def _write_val_terms(path: Path, rows: list[tuple[int, _Validation]], hybrid: bool = False) -> None:
-    """``val_terms.csv``; ``hybrid`` adds the supervised term [J] and the distance to the target [mm]."""
+def _write_val_terms(path: Path, rows: list[tuple[int, _Validation]], hybrid: bool = False,
+                     anchored: bool = False) -> None:
+    """``val_terms.csv``; ``hybrid`` adds the supervised term [J] and the distance to the target [mm],
+    ``anchored`` the anchor's spring [J] and the distance to the initial run's garment [mm]."""
     names = (*TERMS, "total")
-    extra = ["supervised", "sim_mm"] if hybrid else []
+    extra = (["supervised", "sim_mm"] if hybrid else []) + (["anchor", "anchor_mm"] if anchored else [])
     lines = [",".join(["epoch", *(f"{who}_{n}" for who in ("model", "base") for n in names), "mm", *extra])]
     for epoch, v in rows:
-        more = [f"{v.supervised:.9g}", f"{v.sim_mm:.6g}"] if hybrid else []
+        more = ([f"{v.supervised:.9g}", f"{v.sim_mm:.6g}"] if hybrid else []) + \
+            ([f"{v.anchor:.9g}", f"{v.anchor_mm:.6g}"] if anchored else [])
         lines.append(",".join([str(epoch), *(f"{getattr(v, who)[n]:.9g}" for who in ("model", "base") for n in names),
                                f"{v.mm:.6g}", *more]))
     _atomic_text("\n".join(lines) + "\n", path)
@@ -668,12 +727,41 @@ def _hybrid_record(sim_data: Path, config: TrainConfig, tier: Tier, train_clips:
             "val_mm": "mean distance to the target [mm] on the simulated validation sequences"}
 
 
+def _initial_run(init_run: str | Path, tier: Tier, config: TrainConfig, device):
+    """``init_run`` loaded, once it is known to be a run this one can start from, and the fit
+    attribute model it was trained with (a physics run's ``fit.npz``, else its data set's;
+    the attributes the detail model learned are that model's, and the bundle ships it).
+
+    Raises:
+        ArgumentError: naming ``init_run``: another tier or model (width, decomposition,
+            parser), or no fit attribute model at hand.
+    """
+    from .train import load_run
+
+    init = load_run(init_run, device=device)
+    where = f"--init {init_run}"
+    if init.tier is not tier:
+        raise ArgumentError(f"{where}: a {init.tier.value} run; this run trains the {tier.value} tier")
+    for key in ("width", "decompose", "use_parser"):
+        if getattr(init.config, key) != getattr(config, key):
+            raise ArgumentError(f"{where}: its {key} is {getattr(init.config, key)!r}, the --config's "
+                                f"{getattr(config, key)!r}; give the config the initial run's")
+    own = [Path(init_run) / PHYSICS_FIT]  # a physics run's own; a supervised run's data set's
+    if (init.info.get("data") or {}).get("path"):
+        own.append(Path(init.info["data"]["path"]) / PHYSICS_FIT)
+    found = next((path for path in own if path.is_file()), None)
+    if found is None:
+        raise ArgumentError(f"{where}: its fit attribute model is not at hand (no {' or '.join(map(str, own))}); "
+                            f"copy the fit.npz of the data set it was trained on into {init_run}")
+    return init, FitModel.load(found)
+
+
 def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainConfig = TrainConfig(
         objective=Objective.PHYSICS, coarse_base=CoarseBase.SKINNED), *, tier: Tier | str = Tier.COARSE,
         coarse_run: str | Path | None = None, device: str | None = "auto", body: BodyModel | None = None,
         progress: Callable[[EpochRecord], None] | None = None,
         options: PhysicsOptions = PhysicsOptions(), mocap_dir: str | Path | None = None,
-        sim_data: str | Path | None = None) -> TrainResult:
+        sim_data: str | Path | None = None, init_run: str | Path | None = None) -> TrainResult:
     """Train a generator on the physics (or hybrid) objective (see the module docstring).
 
     Args:
@@ -696,10 +784,18 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
             from ``config_path``; its training and validation sequences are the targets.
             run.json records it under ``hybrid`` (how many clips had simulated frames), and
             ``val_mm`` is the validation distance to the target [mm].
+        init_run: start from this trained run's best model (its weights and input statistics)
+            instead of a fresh one: a run of the same tier, width and form (a coarse run's base,
+            heading and features), trained on any objective, e.g. supervised on simulated
+            frames that never left the machine that made them. ``options.anchor_weight`` then
+            adds the spring toward its garment; ``val_mm`` is the validation distance to it
+            [mm] when the anchor is on. run.json records it under ``init_run``.
     Raises:
         ArgumentError: a run exists in ``run_dir``, the config has no training pairs, the
-            tier and ``coarse_run`` do not go together, or ``sim_data`` is missing, not
-            wanted or not a data set of ``config_path``.
+            tier and ``coarse_run`` do not go together, ``sim_data`` is missing, not
+            wanted or not a data set of ``config_path``, or ``init_run`` is not a run this
+            one can start from (another tier, width or form, no fit attribute model at hand),
+            or an anchor is asked for without it.
     """
     from .train import _coarse_run_record, _trainable, load_run, pick_device
 
@@ -713,6 +809,8 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
     if (tier is Tier.DETAIL) != (coarse_run is not None):
         raise ArgumentError("train_physics: the detail tier needs --coarse-run (the trained coarse run), "
                             "the coarse tier takes none")
+    if options.anchor_weight and init_run is None:
+        raise ArgumentError("physics.anchor_weight: the anchor pulls toward the initial run's garment; give --init RUN")
     run_dir = Path(run_dir)
     if (run_dir / CHECKPOINT).exists():
         raise ArgumentError(f"--out {run_dir}: a run exists there; pick a new folder")
@@ -722,11 +820,15 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
     if coarse is not None and coarse.tier is not Tier.COARSE:
         raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run, not a coarse one")
     form = (coarse.config if coarse is not None else config).coarse_form  # a detail run runs as its coarse run
+    init, init_fit = _initial_run(init_run, tier, config, dev) if init_run is not None else (None, None)
+    if init is not None and tier is Tier.COARSE and init.config.coarse_form != form:
+        raise ArgumentError(f"--init {init_run}: its coarse_base, heading and coarse_features are "
+                            f"{init.config.coarse_form}, the --config's {form}; give the config the initial run's")
     data = physics_set(config_path, body, heading=form.heading, splits=(Split.TRAIN, Split.VAL),
                        max_frames=config.max_frames or None, bending_scale=config.bending_scale,
                        contact_margin=config.contact_margin,
                        mocap_dir=mocap_dir, sim_data=sim_data,
-                       sim_target=config.coarse_target if tier is Tier.COARSE else None)
+                       sim_target=config.coarse_target if tier is Tier.COARSE else None, fit=init_fit)
     train_clips, val_clips = data.split(Split.TRAIN), data.split(Split.VAL)
     if not train_clips:
         raise ArgumentError(f"{config_path}: no training sequences")
@@ -736,8 +838,14 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
     tensors = _Tensors(dev)
     step = _Tier(tier, body, form.base, tensors, coarse.model if coarse is not None else None, form.features)
     torch.manual_seed(config.seed)
-    model = build_model(tier, config).to(dev)
-    _statistics(model, step, train_clips, config)
+    anchor = None
+    if init is not None:
+        model = init.model.train()
+        if options.anchor_weight:
+            anchor = _Anchor(copy.deepcopy(init.model).eval().requires_grad_(False), options.anchor_weight)
+    else:
+        model = build_model(tier, config).to(dev)
+        _statistics(model, step, train_clips, config)
     optimizer = torch.optim.Adam(model.parameters(), lr=config.lr)
     run_dir.mkdir(parents=True, exist_ok=True)
     data.fit.save(run_dir / PHYSICS_FIT)
@@ -749,6 +857,7 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
             "physics": {"material": dataclasses.asdict(data.material), "fit": PHYSICS_FIT,
                         "options": options.to_json(), "fps": sorted({c.fps for c in data.clips})},
             "coarse_run": _coarse_run_record(coarse) if coarse is not None else None,
+            "init_run": _coarse_run_record(init) if init is not None else None,
             "body_model_sha256": body.sha256, "torch": torch.__version__}
     weight = config.supervised_weight if hybrid else None
     if hybrid:
@@ -756,6 +865,7 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
     _atomic_text(json.dumps(info, indent=2, sort_keys=True) + "\n", run_dir / RUN)
     against = "skinning" if tier is Tier.COARSE else "the coarse garment"
     target = "the simulation" if tier is Tier.DETAIL else "the simulation's coarse target"
+    measured_from = target if hybrid else "the initial run's garment" if anchor is not None else against
     history: list[EpochRecord] = []
     best_loss, best_epoch = math.inf, -1
     terms_rows: list[tuple[int, _Validation]] = []
@@ -775,24 +885,31 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
             term = _supervised(clip, x[torch.from_numpy(win.index[-1]).to(x.device)], t, weight) if hybrid else None
             if term is not None:
                 loss = loss + term
+            if anchor is not None:
+                x_t = x[torch.from_numpy(win.index[-1]).to(x.device)]
+                loss = loss + anchor.term(clip, x_t, anchor.garment(step, clip, win))
             total += _step(model, optimizer, loss.mean(), config.grad_clip)
-        val = _validate(model, step, val_clips, config, data.material, options, weight)
+        val = _validate(model, step, val_clips, config, data.material, options, weight, anchor)
         record = EpochRecord(epoch=epoch, train_loss=total / max(len(batches), 1),
-                             val_loss=val.relative + val.supervised if hybrid else val.relative,
-                             val_mm=val.sim_mm if hybrid else val.mm, lr=lr, seconds=time.perf_counter() - began)
+                             val_loss=val.relative + val.supervised + val.anchor,
+                             val_mm=val.sim_mm if hybrid else val.anchor_mm if anchor is not None else val.mm,
+                             lr=lr, seconds=time.perf_counter() - began)
         best_loss, best_epoch = _record_epoch(run_dir, model, optimizer, history, record, best_loss, best_epoch)
         terms_rows.append((epoch, val))
-        _write_val_terms(run_dir / VAL_TERMS, terms_rows, hybrid)
+        _write_val_terms(run_dir / VAL_TERMS, terms_rows, hybrid, anchor is not None)
         kind = config.objective.value + (", dynamic" if options.dynamic else "")
         plot_history(history, run_dir / CURVE, title=f"{tier.value} ({kind}): {run_dir.name}",
                      loss_label=f"energy + supervised [J] (validation: energy relative to {against} + supervised)"
                      if hybrid else f"energy [J] (validation: relative to {against})",
-                     mm_label=f"validation: distance from {target if hybrid else against} [mm]", log_loss=False)
+                     mm_label=f"validation: distance from {measured_from} [mm]", log_loss=False)
         log.info("%s %s epoch %d: train %.4g J, val %+.4g J vs %s (%.1f mm from it), %.1f s", kind, tier.value,
                  epoch, record.train_loss, val.relative, against, val.mm, record.seconds)
         if hybrid:
             log.info("hybrid %s epoch %d: val supervised %.4g J, %.2f mm from %s", tier.value, epoch, val.supervised,
                      val.sim_mm, target)
+        if anchor is not None:
+            log.info("anchored %s epoch %d: val anchor %.4g J, %.2f mm from the initial run's garment", tier.value,
+                     epoch, val.anchor, val.anchor_mm)
         if progress is not None:
             progress(record)
     if not history:
