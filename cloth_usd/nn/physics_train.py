@@ -727,14 +727,15 @@ def _hybrid_record(sim_data: Path, config: TrainConfig, tier: Tier, train_clips:
             "val_mm": "mean distance to the target [mm] on the simulated validation sequences"}
 
 
-def _initial_run(init_run: str | Path, tier: Tier, config: TrainConfig, device):
+def _initial_run(init_run: str | Path, tier: Tier, config: TrainConfig, form, device):
     """``init_run`` loaded, once it is known to be a run this one can start from, and the fit
     attribute model it was trained with (a physics run's ``fit.npz``, else its data set's;
     the attributes the detail model learned are that model's, and the bundle ships it).
 
     Raises:
         ArgumentError: naming ``init_run``: another tier or model (width, decomposition,
-            parser), or no fit attribute model at hand.
+            parser), a coarse run of another ``form`` (base, heading, features), or no fit
+            attribute model at hand.
     """
     from .train import load_run
 
@@ -746,6 +747,9 @@ def _initial_run(init_run: str | Path, tier: Tier, config: TrainConfig, device):
         if getattr(init.config, key) != getattr(config, key):
             raise ArgumentError(f"{where}: its {key} is {getattr(init.config, key)!r}, the --config's "
                                 f"{getattr(config, key)!r}; give the config the initial run's")
+    if tier is Tier.COARSE and init.config.coarse_form != form:
+        raise ArgumentError(f"{where}: its coarse_base, heading and coarse_features are {init.config.coarse_form}, "
+                            f"the --config's {form}; give the config the initial run's")
     own = [Path(init_run) / PHYSICS_FIT]  # a physics run's own; a supervised run's data set's
     if (init.info.get("data") or {}).get("path"):
         own.append(Path(init.info["data"]["path"]) / PHYSICS_FIT)
@@ -820,10 +824,7 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
     if coarse is not None and coarse.tier is not Tier.COARSE:
         raise ArgumentError(f"--coarse-run {coarse_run}: is a {coarse.tier.value} run, not a coarse one")
     form = (coarse.config if coarse is not None else config).coarse_form  # a detail run runs as its coarse run
-    init, init_fit = _initial_run(init_run, tier, config, dev) if init_run is not None else (None, None)
-    if init is not None and tier is Tier.COARSE and init.config.coarse_form != form:
-        raise ArgumentError(f"--init {init_run}: its coarse_base, heading and coarse_features are "
-                            f"{init.config.coarse_form}, the --config's {form}; give the config the initial run's")
+    init, init_fit = _initial_run(init_run, tier, config, form, dev) if init_run is not None else (None, None)
     data = physics_set(config_path, body, heading=form.heading, splits=(Split.TRAIN, Split.VAL),
                        max_frames=config.max_frames or None, bending_scale=config.bending_scale,
                        contact_margin=config.contact_margin,
@@ -882,11 +883,11 @@ def train_physics(config_path: str | Path, run_dir: str | Path, config: TrainCon
             win = _window(step, clip, t, options)
             x = step.forward(model, clip, win.inputs)
             loss = _terms(clip, x, win, data.material, options)["total"]
-            term = _supervised(clip, x[torch.from_numpy(win.index[-1]).to(x.device)], t, weight) if hybrid else None
+            x_t = x[torch.from_numpy(win.index[-1]).to(x.device)]  # the garments at each window's t
+            term = _supervised(clip, x_t, t, weight) if hybrid else None
             if term is not None:
                 loss = loss + term
             if anchor is not None:
-                x_t = x[torch.from_numpy(win.index[-1]).to(x.device)]
                 loss = loss + anchor.term(clip, x_t, anchor.garment(step, clip, win))
             total += _step(model, optimizer, loss.mean(), config.grad_clip)
         val = _validate(model, step, val_clips, config, data.material, options, weight, anchor)
