@@ -22,8 +22,8 @@ Pareto front marked; needs ``--data``) and ``OUT/bench.json``. The issue's targe
 beside the measurements, never asserted. With torch installed, the detail model's
 onnxruntime / torch eager speed at the bundle's width is printed too (random weights).
 
-Run: python bench/bench_tiers.py [--bundle DIR] [--data DIR] [--vertices 4000] [--frames 48]
-         [--threads 2] [--batch-size 4] [--out out/bench_tiers]
+Run: python bench/bench_tiers.py [--bundle DIR] [--data DIR] [--vertices 4000 | --garment STAGE.usda]
+         [--frames 48] [--threads 2] [--batch-size 4] [--out out/bench_tiers]
 """
 
 from __future__ import annotations
@@ -144,7 +144,7 @@ def quantize_bundle(bundle, out_dir: Path) -> tuple[Path | None, dict[str, str]]
                         configs={t: e.get("config", {}) for t, e in m["models"].items()},
                         training_data=m.get("training_data", {}),
                         metrics={"note": "int8 dynamic quantization of " + str(bundle.path)},
-                        opset=int(m.get("opset", 18)))
+                        opset=int(m.get("opset", 18)), form=bundle.form, garment=bundle.garment)
     return path, failed
 
 
@@ -182,9 +182,27 @@ def _time_frames(fn, frames: int, repeats: int) -> list[float]:
     return out
 
 
+def stage_garment(path: Path, body) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(rest points in the canonical body frame, triangles, betas)`` of a stage's only garment."""
+    from cloth_usd.core.body import shape_body
+    from cloth_usd.core.frames import canonical_rest_points, rest_orientation
+    from cloth_usd.usd.read import open_stage, read_scene
+
+    scene = read_scene(open_stage(path))
+    garment = scene.garments[0]
+    char = next(c for c in scene.characters if c.prim_path == garment.body_path)
+    joints = shape_body(body, char.betas)[1]
+    rest = canonical_rest_points(garment.rest_points, char.rest_root_position,
+                                 rest_orientation(char.rest_joints, joints), joints)
+    return rest, np.asarray(garment.triangles, dtype=np.int64), np.asarray(char.betas, dtype=np.float64)
+
+
 def measure_speed(bundles: dict[str, Path | None], rows: dict[tuple[str, str], Row], *, vertices: int,
-                  frames: int, repeats: int, threads: int, batch_size: int) -> tuple[dict, object]:
-    """Fill the speed columns of ``rows``; returns the shirt and motion used, and the shirt's graph."""
+                  frames: int, repeats: int, threads: int, batch_size: int,
+                  garment: Path | None = None) -> tuple[dict, object]:
+    """Fill the speed columns of ``rows``; returns the shirt and motion used, and the shirt's graph.
+    ``garment``: a stage whose garment (and body shape) is timed instead of a made shirt (a
+    garment's own bundle serves its garment alone)."""
     from cloth_usd.core.body import load_body_model
     from cloth_usd.core.skinning import bind_garment, skin_garment
     from cloth_usd.datagen import TShirtParams, make_tshirt, walk_cycle
@@ -192,8 +210,11 @@ def measure_speed(bundles: dict[str, Path | None], rows: dict[tuple[str, str], R
     from cloth_usd.runtime.garment import LearnedGarment
 
     body = load_body_model()
-    betas = np.zeros(body.shapedirs.shape[-1])
-    rest, faces = make_tshirt(body, betas, TShirtParams(target_vertices=vertices))
+    if garment is not None:
+        rest, faces, betas = stage_garment(garment, body)
+    else:
+        betas = np.zeros(body.shapedirs.shape[-1])
+        rest, faces = make_tshirt(body, betas, TShirtParams(target_vertices=vertices))
     warm = min(batch_size, frames)
     poses, transl = walk_cycle(warm + frames)
     wp, wt, tp, tt = poses[:warm], transl[:warm], poses[warm:], transl[warm:]
@@ -437,6 +458,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--bundle", type=Path, help="model bundle folder (default: the shipped tshirt bundle)")
     p.add_argument("--data", type=Path, help="a cloth-usd datagen folder: error on its test splits")
     p.add_argument("--vertices", type=int, default=TARGET_VERTICES, help="target shirt vertex count")
+    p.add_argument("--garment", type=Path, help="a stage whose garment is timed instead of a made shirt (needed for "
+                                                "a garment's own bundle: train-garment's stage)")
     p.add_argument("--frames", type=int, default=48, help="timed frames (after one warm-up batch)")
     p.add_argument("--repeats", type=int, default=3, help="timed runs of the frames; the median is reported")
     p.add_argument("--threads", type=int, default=TARGET_THREADS, help="onnxruntime intra-op (and BLAS) threads")
@@ -485,8 +508,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         paths = {"fp32": bundle.path, "int8": int8_path}
         with threadpool_limits(limits=a.threads, user_api="blas"):
             speed, graph = measure_speed(paths, rows, vertices=a.vertices, frames=a.frames, repeats=a.repeats,
-                                         threads=a.threads, batch_size=a.batch_size)
-        if a.no_torch or graph is None:  # outside the BLAS limit: under it torch eager runs 10x slower
+                                         threads=a.threads, batch_size=a.batch_size, garment=a.garment)
+        if a.no_torch or graph is None or bundle.garment is not None:  # outside the BLAS limit: under it torch
+            # eager runs 10x slower; a garment's own models are not the graph models it builds
             ratio = ["onnxruntime / torch eager: skipped" + (" (--no-torch)" if a.no_torch else "")]
         else:
             ratio = torch_ratio(bundle.path, graph=graph, threads=a.threads, batch_sizes=sorted({1, a.batch_size}))

@@ -164,10 +164,18 @@ def _parser() -> argparse.ArgumentParser:
                                                           "simulates them alone), entries as --motions (default: a "
                                                           "procedural dance and walk)")
     tg.add_argument("--mocap", metavar="DIR", help="the folder the --motions BVH clips are relative to")
-    tg.add_argument("--coarse-epochs", type=int, default=8, help="coarse epochs (default 8)")
-    tg.add_argument("--detail-epochs", type=int, default=3, help="detail epochs (default 3)")
-    tg.add_argument("--batches", type=int, default=100, help="batches of 8 frames per coarse epoch (default 100; "
-                                                             "the detail model takes 60%%)")
+    tg.add_argument("--form", choices=("garment", "paper"),
+                    help="garment (the default for one garment): models of this garment alone (pose and shape to a "
+                         "displacement of its vertices), the closest to cloth; paper (the default for several): the "
+                         "paper's graph models (any topology; one bundle for several garments of a category)")
+    tg.add_argument("--steps", type=int, default=3000,
+                    help="garment form: coarse model steps of 8 frames (default 3000)")
+    tg.add_argument("--detail-steps", type=int, default=1500,
+                    help="garment form: detail model steps of 8 frames (default 1500)")
+    tg.add_argument("--coarse-epochs", type=int, default=8, help="paper form: coarse epochs (default 8)")
+    tg.add_argument("--detail-epochs", type=int, default=3, help="paper form: detail epochs (default 3)")
+    tg.add_argument("--batches", type=int, default=100, help="paper form: batches of 8 frames per coarse epoch "
+                                                             "(default 100; the detail model takes 60%%)")
     tg.add_argument("--threads", type=int, help="torch CPU threads")
     tg.add_argument("--device", default="auto", help="torch device (default: CUDA when present)")
     tg.add_argument("--joint-map", metavar="FILE", help=_JOINT_MAP_HELP)
@@ -519,7 +527,9 @@ def _train_garment(args: argparse.Namespace) -> int:
     from .nn.own_garment import TEST_SET_CONFIG, OwnGarmentPlan, train_own_garment
     from .usd.read import open_stage, read_scene
 
-    plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches)
+    plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches,
+                          form=args.form or ("garment" if len(args.scene) == 1 else "paper"), steps=args.steps,
+                          detail_steps=args.detail_steps)
 
     def motion_list(flag: str, path: str | None) -> tuple:
         if not path:
@@ -560,8 +570,13 @@ def _train_garment(args: argparse.Namespace) -> int:
         torch.set_num_threads(args.threads)
 
     def show(tier, r) -> None:
-        sys.stdout.write(f"{tier} epoch {r.epoch + 1}: val {r.val_loss:+.4g} J ({r.val_mm:.2f} mm from "
-                         f"{'skinning' if tier == 'coarse' else 'the coarse garment'}), {r.seconds:.0f} s\n")
+        start = 'skinning' if tier == 'coarse' else 'the coarse garment'
+        if isinstance(r, dict):  # the garment form: a validation row
+            sys.stdout.write(f"{tier} step {r['step']}: val {r['val_energy']:.4g} J a frame ({start} "
+                             f"{r['val_start_energy']:.4g} J, {r['val_mm']:.2f} mm from it), {r['seconds']:.0f} s\n")
+        else:
+            sys.stdout.write(f"{tier} epoch {r.epoch + 1}: val {r.val_loss:+.4g} J ({r.val_mm:.2f} mm from "
+                             f"{start}), {r.seconds:.0f} s\n")
         sys.stdout.flush()
 
     mocap = f" --mocap {args.mocap or 'MOCAP'}" if any("bvh" in m for m in test_motions) else ""  # the test set's clips

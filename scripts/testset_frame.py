@@ -2,12 +2,13 @@
 for a side-by-side close-up (``scripts/render_tiers.py --frame-file``).
 
     .venv/bin/python scripts/testset_frame.py DATA SEQUENCE FRAME -o FRAME.npz \\
-        [--bundle models/bundles/tshirt-v6]
+        [--bundle models/bundles/tshirt-v6 [--bundle B2 ...]] [--tiers coarse,detail]
 
 DATA is a ``cloth-usd datagen`` folder (the test set), SEQUENCE a name from its manifest (or a
 unique part of one), FRAME an evaluated frame (after the warm-up, as ``cloth-usd evaluate``
-counts). The file holds the posed body and, per panel, the garment points; the script prints
-each panel's error against Newton at that frame.
+counts). The file holds the posed body and, per panel, the garment points (skinning, each
+bundle's tiers, Newton; with several bundles a panel is named after its bundle and tier); the
+script prints each panel's error against Newton at that frame.
 """
 
 from __future__ import annotations
@@ -34,8 +35,10 @@ def main(argv: list[str]) -> int:
     ap.add_argument("sequence")
     ap.add_argument("frame", type=int)
     ap.add_argument("-o", "--output", required=True)
-    ap.add_argument("--bundle", default=str(Path(__file__).resolve().parents[1] / "models/bundles/tshirt-v6"))
+    ap.add_argument("--bundle", action="append", help="a bundle (repeatable; default models/bundles/tshirt-v6)")
+    ap.add_argument("--tiers", default="coarse,detail", help="the learned tiers to show (default coarse,detail)")
     args = ap.parse_args(argv)
+    bundles = args.bundle or [str(Path(__file__).resolve().parents[1] / "models/bundles/tshirt-v6")]
 
     body = load_body_model()
     data = load_dataset(args.data, body=body)
@@ -48,14 +51,16 @@ def main(argv: list[str]) -> int:
     if not 0 <= t < clip.num_frames:
         raise SystemExit(f"{clip.name}: frame {t} is outside 0..{clip.num_frames - 1}")
     poses, transl = clip.poses[t:t + 1], clip.transl[t:t + 1]
-    bundle = load_bundle(args.bundle)
-    learned = LearnedGarment(bundle, body, clip.pair.betas, clip.rest_points, clip.pair.faces,
-                             binding=clip.pair.binding)
     # The learned tiers see the whole sequence up to the frame (the detail model is per frame,
     # but this keeps the call the one `evaluate` makes).
     panels = {"skinning": skin_garment(clip.pair.binding, poses, transl, body.parents)[0]}
-    for tier in ("coarse", "detail"):
-        panels[tier] = learned.evaluate(tier, clip.poses[:t + 1], clip.transl[:t + 1]).points[-1]
+    for path in bundles:
+        bundle = load_bundle(path)
+        learned = LearnedGarment(bundle, body, clip.pair.betas, clip.rest_points, clip.pair.faces,
+                                 binding=clip.pair.binding)
+        for tier in args.tiers.split(","):
+            label = tier if len(bundles) == 1 else f"{bundle.name} {tier}"
+            panels[label] = learned.evaluate(tier, clip.poses[:t + 1], clip.transl[:t + 1]).points[-1]
     panels["Newton"] = clip.positions[t].astype(np.float64)
     for label, pts in panels.items():
         err = np.linalg.norm(pts - panels["Newton"], axis=1) * 1000.0

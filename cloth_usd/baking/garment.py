@@ -19,7 +19,7 @@ from ..core.plausibility import body_notes
 from ..core.provenance import GarmentReport
 from ..core.scene import Character, Garment, Tier
 from ..core.skinning import SkinBinding, bind_worn, skin_garment
-from ..errors import GarmentError
+from ..errors import BundleError, GarmentError
 from ..runtime.bundle import ModelBundle
 from ..runtime.garment import LearnedGarment
 from .cache import ModelCache, garment_key
@@ -101,7 +101,12 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
         binding = bind_worn(body, char.betas, rest, garment.triangles, garment.category)
         if tier is Tier.SKINNING:
             return binding, None
-        return binding, LearnedGarment(bundle, body, char.betas, rest, garment.triangles, binding=binding)
+        try:
+            return binding, LearnedGarment(bundle, body, char.betas, rest, garment.triangles, binding=binding)
+        except BundleError as exc:  # a garment's own bundle given another garment: say which
+            if bundle is not None and bundle.garment is not None:
+                raise BundleError(f"{where}: {exc}") from None
+            raise
 
     binding, learned = cache.garment(garment_key(garment, body, char.betas, rest, tier, bundle), prepare)
     warnings = [f"{where}: {note}" for note in notes]

@@ -37,6 +37,7 @@ from .body import BodyModel, lbs, shape_body
 from .features import (CONTACT_FEATURES, COARSE_FEATURES, attributes, coarse_features, contact_features,
                        detail_features, vertex_normals)
 from .fit import FIT_LIMIT, FitModel, pair_distances
+from .garment_inputs import skin_displaced
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
 from .postprocess import DEFAULT_MARGIN, push_out_of_surface, search_tree
@@ -47,7 +48,7 @@ from .smpl import JOINT_NAMES
 __all__ = ["GarmentPair", "BodyPatch", "body_patch", "body_under", "swinging_parts", "SWINGING_JOINTS", "CONTACT_REACH",
            "PosedBody", "prepare_pair", "pose_body", "coarse_model_features", "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn",
            "CoarseBase", "coarse_base_points", "CoarseFeatures", "coarse_feature_count", "CoarseForm",
-           "contact_trees"]
+           "contact_trees", "run_garment_model", "GarmentFn"]
 
 #: A coarse model: ``(features (B, N, F), graph) -> delta (B, N, 3) [m]`` (F: :func:`coarse_feature_count`).
 CoarseFn = Callable[[np.ndarray, MeshGraph], np.ndarray]
@@ -355,6 +356,48 @@ def coarse_base_points(body: BodyModel, pair: GarmentPair, posed: PosedBody, pos
     if skinned is not None:
         return skinned
     return skin_garment(pair.binding, poses, transl, body.parents)
+
+
+#: A garment's own model: (T, 72) poses in the canonical heading -> (T, N, 3) displacement of
+#: the unposed garment [m] (:mod:`cloth_usd.core.garment_inputs`).
+GarmentFn = Callable[[np.ndarray], np.ndarray]
+
+
+def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray,
+                      model: GarmentFn, *, batch_size: int = 16, margin: float = DEFAULT_MARGIN,
+                      postprocess: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Animate a garment with its own model: the model reads the pose with the heading taken
+    out (so a turned character gets the same garment turned), its displacement of the unposed
+    garment is skinned with the world pose, then the post-process (as :func:`run_tiers`).
+
+    Args:
+        poses: (T, 72) axis-angle [rad]; transl: (T, 3) root translation [m].
+        model: see :data:`GarmentFn`.
+        batch_size: frames per model call.
+        margin: the post-process clearance [m].
+        postprocess: False leaves the model's garment as it made it.
+    Returns:
+        ``(points (T, N, 3) float64 [m], moved (T,) int64)``.
+    """
+    num_t, n = poses.shape[0], pair.num_vertices
+    canonical = heading_frame(poses, transl, pair.joints[0]).canonical_poses(poses)
+    points = np.empty((num_t, n, 3))
+    moved = np.zeros(num_t, dtype=np.int64)
+    for lo in range(0, num_t, batch_size):
+        hi = min(lo + batch_size, num_t)
+        d = np.asarray(model(canonical[lo:hi]), dtype=np.float64)
+        if d.shape != (hi - lo, n, 3):
+            raise ArgumentError(f"the garment model gave a displacement of shape {d.shape}, expected "
+                                f"({hi - lo}, {n}, 3)")
+        m = skin_displaced(pair.binding, poses[lo:hi], transl[lo:hi], body.parents, d)
+        if postprocess:
+            posed = pose_body(body, pair, poses[lo:hi], transl[lo:hi])
+            points[lo:hi], moved[lo:hi] = push_out_of_surface(m, posed.patch_points, posed.patch_normals,
+                                                              pair.patch.faces, pair.patch.contact, margin=margin,
+                                                              rings=pair.patch.rings)
+        else:
+            points[lo:hi] = m
+    return points, moved
 
 
 def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray,

@@ -71,6 +71,8 @@ TEST_SET_SPLITS = ("test_motion", "test_body")
 TEST_SET_SIM = {"collider_faces": None, "self_contact": False}
 #: The garments in the work folder: ``garment.npz``, then ``garment1.npz``, ``garment2.npz``, ...
 GARMENT_FILE = "garment.npz"
+#: The model forms ``train-garment`` trains (:attr:`OwnGarmentPlan.form`).
+FORMS = ("garment", "paper")
 
 
 @dataclass(frozen=True)
@@ -89,9 +91,19 @@ class OwnGarmentPlan:
     detail_width: float = 0.125
     """The detail model's width."""
     seed: int = 0
+    form: str = "garment"
+    """``garment``: the garment's own models (:mod:`cloth_usd.nn.garment_model`, one garment,
+    ``steps`` and ``detail_steps``); ``paper``: the paper's graph models (any topology, several
+    garments of a category; ``coarse_epochs``, ``detail_epochs`` and ``batches``)."""
+    steps: int = 3000
+    """The garment form's coarse model: Adam steps of 8 frames."""
+    detail_steps: int = 1500
+    """The garment form's detail model: Adam steps of 8 frames."""
 
     def __post_init__(self) -> None:
-        for name in ("coarse_epochs", "detail_epochs", "batches"):
+        if self.form not in FORMS:
+            raise ArgumentError(f"--form must be one of {', '.join(FORMS)}, got {self.form!r}")
+        for name in ("coarse_epochs", "detail_epochs", "batches", "steps", "detail_steps"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ArgumentError(f"--{name.replace('_', '-')} must be an integer >= 1, got {value!r}")
@@ -106,6 +118,12 @@ class OwnGarmentPlan:
                 "lr_decay": 0.9, "batch": 8, "width": self.detail_width, "seed": self.seed,
                 "max_batches": max(1, int(round(0.6 * self.batches)))}
 
+    def garment_configs(self) -> dict:
+        """The garment form's :class:`~cloth_usd.nn.garment_model.GarmentModelConfig` fields per tier:
+        the coarse model with the stiffer bending the paper's coarse tier trains with."""
+        return {"coarse": {"steps": self.steps, "bending_scale": 10.0, "seed": self.seed},
+                "detail": {"steps": self.detail_steps, "bending_scale": 1.0, "seed": self.seed}}
+
 
 @dataclass(frozen=True)
 class OwnGarmentResult:
@@ -114,11 +132,14 @@ class OwnGarmentResult:
     bundle: Path
     work_dir: Path
     seconds: dict
-    """``{"coarse": s, "detail": s, "export": s, "total": s}`` wall time."""
+    """``{"coarse": s, "detail": s, "export": s, "total": s}`` wall time (the garment form also
+    ``"plan"``: planning the sequences once for both models)."""
     coarse_val: tuple[float, float]
-    """The coarse run's best validation: energy against skinning [J a frame], distance from it [mm]."""
+    """The coarse run's best validation: energy [J a frame] (the paper form: against skinning's),
+    distance from skinning [mm]."""
     detail_val: tuple[float, float]
-    """The detail run's best validation: energy against the coarse garment [J], distance [mm]."""
+    """The detail run's best validation: energy [J] (the paper form: against the coarse garment's),
+    distance from the coarse garment [mm]."""
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -172,6 +193,9 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
 
     if not garments:
         raise ArgumentError("train-garment: no garment given")
+    if plan.form == "garment" and len(garments) > 1:
+        raise ArgumentError(f"train-garment: {len(garments)} garments given; the garment form learns one garment "
+                            "(--form paper trains one bundle for several of a category)")
     categories = sorted({Category(g.category).value for g in garments})
     if len(categories) > 1:
         raise ArgumentError(f"train-garment: the garments are of several categories ({', '.join(categories)}); "
@@ -203,6 +227,9 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
                                          "train_motions": list(PROCEDURAL_MOTIONS),
                                          "test_motions": list(test_motions or TEST_MOTIONS),
                                          "simulate_splits": list(TEST_SET_SPLITS)})
+    if plan.form == "garment":
+        return _train_garment_form(garments[0], work, out_dir, runs, name=name, category=category, plan=plan,
+                                   force=force, body=body, mocap_dir=mocap_dir, progress=progress)
     _write_json(work / "coarse.json", plan.coarse_config())
     _write_json(work / "detail.json", plan.detail_config())
     seconds: dict[str, float] = {}
@@ -227,3 +254,40 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
     log.info("%s: bundle in %s after %.1f min", name, out_dir, seconds["total"] / 60)
     return OwnGarmentResult(bundle=out_dir, work_dir=work, seconds=seconds, coarse_val=_best(results["coarse"]),
                             detail_val=_best(results["detail"]))
+
+
+def _train_garment_form(garment: OwnGarment, work: Path, out_dir: Path, runs: dict, *, name: str, category: Category,
+                        plan: OwnGarmentPlan, force: bool, body: BodyModel, mocap_dir,
+                        progress: Callable[[str, object], None] | None) -> OwnGarmentResult:
+    """:func:`train_own_garment` of the garment form: plan the sequences once, train the coarse
+    and the detail garment models, export them (:mod:`cloth_usd.nn.garment_model`)."""
+    from .garment_model import GarmentModelConfig, export_garment_bundle, train_garment_model
+    from .physics_train import physics_set
+
+    configs = plan.garment_configs()
+    for tier, fields in configs.items():
+        _write_json(work / f"{tier}.json", {**GarmentModelConfig(**fields).to_json(), "form": "garment"})
+    seconds: dict[str, float] = {}
+    began = time.perf_counter()
+    data = physics_set(work / DATA_CONFIG, body, mocap_dir=mocap_dir)
+    seconds["plan"] = time.perf_counter() - began
+    infos = {}
+    for tier in ("coarse", "detail"):
+        t0 = time.perf_counter()
+        infos[tier] = train_garment_model(
+            work / DATA_CONFIG, runs[tier], GarmentModelConfig(**configs[tier]), tier=Tier(tier),
+            coarse_run=runs["coarse"] if tier == "detail" else None, body=body, physics=data,
+            progress=(lambda row, tier=tier: progress(tier, row)) if progress is not None else None)
+        seconds[tier] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    export_garment_bundle(runs["coarse"], runs["detail"], work / DATA_CONFIG, out_dir, name=name,
+                          category=category.value, force=force, body=body, physics=data, mocap_dir=mocap_dir,
+                          description=f"{name}: {_described([garment])}, its own models trained on its physics "
+                                      "by cloth-usd train-garment")
+    seconds["export"] = time.perf_counter() - t0
+    seconds["total"] = time.perf_counter() - began
+    _write_json(work / "timing.json", {k: round(v, 1) for k, v in seconds.items()})
+    log.info("%s: bundle in %s after %.1f min", name, out_dir, seconds["total"] / 60)
+    return OwnGarmentResult(bundle=out_dir, work_dir=work, seconds=seconds,
+                            coarse_val=(infos["coarse"]["best_val_energy"], infos["coarse"]["best_val_mm"]),
+                            detail_val=(infos["detail"]["best_val_energy"], infos["detail"]["best_val_mm"]))

@@ -12,6 +12,10 @@ A bundle is a folder::
     <bundle>/detail.onnx     the detail generator with its parser (optional)
     <bundle>/fit.npz         the fit attribute's factor-analysis model (FitModel.save)
 
+A garment's own bundle (``cloth-usd train-garment``, :mod:`cloth_usd.nn.garment_model`) adds
+``garment {vertices, faces_sha256}`` to the manifest: its models take ``pose`` and ``betas``
+(runtime.io.GARMENT_INPUTS) and serve that garment's triangles alone.
+
 :func:`load_bundle` checks every listed file's sha256 before anything is used; the
 bundle's identity (recorded in every cache it bakes) is its name and the sha256 of its
 ``manifest.json``, which in turn pins every file. Sessions are made lazily, once per
@@ -37,11 +41,11 @@ from ..core.limits import betas_range_from_record, pose_range_from_record
 from ..core.pipeline import CoarseBase, CoarseFeatures, CoarseForm
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError, BundleError, ClothUsdError
-from .io import COARSE_INPUTS, DETAIL_INPUTS, OUTPUT
+from .io import COARSE_INPUTS, DETAIL_INPUTS, GARMENT_INPUTS, OUTPUT
 from .session import ModelSession
 
-__all__ = ["FORMAT_VERSION", "MANIFEST", "DEFAULTS", "ModelBundle", "load_bundle", "find_bundle", "write_bundle",
-           "default_bundle_dir"]
+__all__ = ["FORMAT_VERSION", "MANIFEST", "DEFAULTS", "GarmentIdentity", "ModelBundle", "load_bundle", "find_bundle",
+           "write_bundle", "default_bundle_dir"]
 
 log = logging.getLogger(__name__)
 
@@ -50,6 +54,19 @@ FORMAT_VERSION = 1
 #: The manifest's file name inside a bundle folder.
 MANIFEST = "manifest.json"
 _INPUTS = {Tier.COARSE: COARSE_INPUTS, Tier.DETAIL: DETAIL_INPUTS}
+
+
+@dataclass(frozen=True)
+class GarmentIdentity:
+    """The one garment a garment's own bundle serves (the manifest's ``garment``)."""
+
+    vertices: int
+    """N."""
+    faces_sha256: str
+    """sha256 of its (M, 3) triangles as int64 (:func:`cloth_usd.nn.garment_model.faces_sha256`)."""
+
+    def to_json(self) -> dict:
+        return {"vertices": int(self.vertices), "faces_sha256": str(self.faces_sha256)}
 _FILES = {Tier.COARSE: "coarse.onnx", Tier.DETAIL: "detail.onnx"}
 _FIT = "fit.npz"
 
@@ -90,6 +107,9 @@ class ModelBundle:
     """(B, 2) the range of shape coefficients of the bodies the models were trained on (the
     manifest's ``training_data.bodies``, :func:`~cloth_usd.core.limits.betas_range_record`);
     None for a bundle that records none (then ``|beta| <= BETA_LIMIT`` stands in)."""
+    garment: GarmentIdentity | None = None
+    """The one garment a garment's own bundle serves (its models take the pose and the shape,
+    :data:`~cloth_usd.runtime.io.GARMENT_INPUTS`); None: a category's bundle (any topology)."""
     _sessions: dict = field(default_factory=dict, repr=False)
 
     def model_path(self, tier: Tier) -> Path:
@@ -186,10 +206,11 @@ def load_bundle(path: str | Path) -> ModelBundle:
         entry = models.get(tier.value)
         if not isinstance(entry, dict) or entry.get("file") not in files:
             raise BundleError(f"{mpath}: models.{tier.value} must name a file listed in 'files'")
-        if tuple(entry.get("inputs", ())) != _INPUTS[tier] or list(entry.get("outputs", ())) != [OUTPUT]:
+        inputs = GARMENT_INPUTS if "garment" in manifest else _INPUTS[tier]
+        if tuple(entry.get("inputs", ())) != inputs or list(entry.get("outputs", ())) != [OUTPUT]:
             raise BundleError(f"{mpath}: models.{tier.value} inputs/outputs {entry.get('inputs')} -> "
                               f"{entry.get('outputs')} do not match this runtime's "
-                              f"{list(_INPUTS[tier])} -> ['{OUTPUT}']")
+                              f"{list(inputs)} -> ['{OUTPUT}']")
     base = models[Tier.COARSE.value].get("base", CoarseBase.BODY.value)
     if base not in {b.value for b in CoarseBase}:
         raise BundleError(f"{mpath}: models.coarse.base {base!r} is not one of "
@@ -202,6 +223,13 @@ def load_bundle(path: str | Path) -> ModelBundle:
     if features not in {f.value for f in CoarseFeatures}:
         raise BundleError(f"{mpath}: models.coarse.features {features!r} is not one of "
                           f"{', '.join(f.value for f in CoarseFeatures)} (a newer bundle? update cloth-usd)")
+    garment = None
+    if "garment" in manifest:
+        entry = manifest["garment"]
+        if not (isinstance(entry, dict) and isinstance(entry.get("vertices"), int) and entry["vertices"] > 0
+                and isinstance(entry.get("faces_sha256"), str)):
+            raise BundleError(f"{mpath}: manifest field 'garment' must be {{vertices: int > 0, faces_sha256: str}}")
+        garment = GarmentIdentity(entry["vertices"], entry["faces_sha256"])
     try:
         records = _training_records(manifest.get("training_data"))
     except ValueError as exc:
@@ -227,7 +255,7 @@ def load_bundle(path: str | Path) -> ModelBundle:
     return ModelBundle(path=folder, name=name, category=category, tiers=tiers,
                        sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit,
                        form=CoarseForm(base, heading, features), pose_limits=records.get("poses"),
-                       betas_limits=records.get("bodies"))
+                       betas_limits=records.get("bodies"), garment=garment)
 
 
 #: In a folder of bundles: ``{"<category>": "<bundle folder>"}``, the bundle tried first for a
@@ -307,7 +335,8 @@ def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | No
 def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, coarse_onnx: str | Path,
                  detail_onnx: str | Path | None, fit_npz: str | Path, configs: Mapping[str, Any],
                  training_data: Mapping[str, Any], metrics: Mapping[str, Any], opset: int,
-                 force: bool = False, form: CoarseForm = CoarseForm()) -> Path:
+                 force: bool = False, form: CoarseForm = CoarseForm(),
+                 garment: GarmentIdentity | None = None) -> Path:
     """Copy exported models and the fit model into a new bundle folder and write its manifest.
 
     Args:
@@ -324,6 +353,8 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         opset: the ONNX opset of the exported files.
         form: how the models were trained (base, heading, coarse features), recorded in
             ``models.coarse``.
+        garment: the one garment a garment's own models serve (their inputs are then
+            :data:`~cloth_usd.runtime.io.GARMENT_INPUTS`); None: a category's models.
     Returns:
         The bundle folder.
     """
@@ -355,7 +386,8 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
             continue
         shutil.copyfile(src, out / _FILES[tier])
         files[_FILES[tier]] = file_sha256(out / _FILES[tier])
-        models[tier.value] = {"file": _FILES[tier], "inputs": list(_INPUTS[tier]), "outputs": [OUTPUT],
+        inputs = GARMENT_INPUTS if garment is not None else _INPUTS[tier]
+        models[tier.value] = {"file": _FILES[tier], "inputs": list(inputs), "outputs": [OUTPUT],
                               "config": dict(configs.get(tier.value, {}))}
         if tier is Tier.COARSE:
             models[tier.value].update(base=form.base.value, heading=form.heading.value,
@@ -375,5 +407,7 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         "training_data": dict(training_data),
         "metrics": dict(metrics),
     }
+    if garment is not None:
+        manifest["garment"] = garment.to_json()
     (out / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     return out

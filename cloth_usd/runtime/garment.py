@@ -4,7 +4,10 @@ Everything that depends only on the garment-body pair is computed once, when a
 :class:`LearnedGarment` is made: the association (through the skinning binding), the
 garment graph, and the fit attribute alpha. :meth:`LearnedGarment.evaluate` then runs
 frames in batches: pose the body, coarse features -> coarse model -> ``M_coarse``, detail
-features on ``M_coarse`` -> detail model -> ``M_detail``, and the post-process.
+features on ``M_coarse`` -> detail model -> ``M_detail``, and the post-process. A garment's
+own bundle (:attr:`ModelBundle.garment`) serves only the triangles it was trained on: its
+model maps the pose and the shape to a displacement of the unposed garment, which the
+garment's skinning then poses (:mod:`cloth_usd.nn.garment_model`), then the post-process.
 Shape letters: T frames, N garment vertices, V body vertices, M triangles, J joints.
 """
 
@@ -74,6 +77,17 @@ class LearnedGarment:
         self.graph: MeshGraph = self.pair.graph
         self.alpha: np.ndarray = self.pair.alpha
         """(F,) the pair's fit attribute alpha (F = 3)."""
+        self.own = bundle.garment is not None
+        """True for a garment's own bundle (its model serves this garment's triangles alone)."""
+        if self.own:
+            from ..core.garment_inputs import faces_sha256
+
+            ident = bundle.garment
+            if len(rest_points) != ident.vertices or faces_sha256(self.faces) != ident.faces_sha256:
+                raise BundleError(f"{bundle.path}: bundle '{bundle.name}' was trained for one garment of "
+                                  f"{ident.vertices} vertices, and this garment ({len(rest_points)} vertices) is not "
+                                  "it (other triangles); bake it with its category's bundle or train one for it "
+                                  "with cloth-usd train-garment")
         if self.alpha.shape != (3,):
             raise BundleError(f"{bundle.path}: the fit model has {self.alpha.shape[0]} factors, "
                               "the models take 3")
@@ -111,6 +125,18 @@ class LearnedGarment:
         transl = np.asarray(transl, dtype=np.float64).reshape(-1, 3)
         if transl.shape[0] != poses.shape[0]:
             raise ArgumentError(f"poses has {poses.shape[0]} frames, transl {transl.shape[0]}")
+        if self.own:
+            from ..core.pipeline import run_garment_model
+            from ..core.garment_inputs import garment_displacement_inputs
+
+            session = self.bundle.session(tier)
+
+            def run_model(canonical_poses: np.ndarray) -> np.ndarray:
+                return session.run(garment_displacement_inputs(canonical_poses, self.betas))[OUTPUT]
+
+            points, moved = run_garment_model(self.body, self.pair, poses, transl, run_model, batch_size=batch_size,
+                                              margin=self.margin, postprocess=postprocess)
+            return LearnedFrames(points=points, moved=moved)
         coarse = self.bundle.session(Tier.COARSE)
         detail = self.bundle.session(Tier.DETAIL) if tier is Tier.DETAIL else None
 

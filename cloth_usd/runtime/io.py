@@ -17,6 +17,11 @@ Detail model inputs, in order (N2 pooled clusters, P members, K2 pooled neighbou
   (N2, K2) bool.
 
 Both output ``delta`` (B, N, 3) float32 displacement [m]. Every dimension is dynamic.
+
+A garment's own model (a bundle with a ``garment`` entry, :mod:`cloth_usd.nn.garment_model`)
+takes instead ``pose`` (B, 216) float32, the 24 joints' rotation matrices minus the identity
+with the heading taken out of the root, and ``betas`` (B, 10) float32; its ``delta`` (B, N, 3)
+is the displacement of that garment's N vertices in its unposed frame, before skinning.
 """
 
 from __future__ import annotations
@@ -25,11 +30,12 @@ import numpy as np
 
 from ..core.graph import MeshGraph, NeighbourTable
 
-__all__ = ["COARSE_INPUTS", "DETAIL_INPUTS", "OUTPUT", "coarse_inputs", "detail_inputs"]
+__all__ = ["COARSE_INPUTS", "DETAIL_INPUTS", "GARMENT_INPUTS", "OUTPUT", "coarse_inputs", "detail_inputs"]
 
 COARSE_INPUTS = ("features", "nbr", "nbr_mask")
 DETAIL_INPUTS = ("features", "attributes", "nbr", "nbr_mask", "cluster", "members",
                  "members_mask", "pooled_nbr", "pooled_nbr_mask")
+GARMENT_INPUTS = ("pose", "betas")
 OUTPUT = "delta"
 
 

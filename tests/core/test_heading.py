@@ -120,3 +120,28 @@ def test_precomputed_world_skinning_is_the_skinned_base_in_either_heading(shirt,
     np.testing.assert_array_equal(moved, ref_moved)
     with pytest.raises(ArgumentError, match=r"skinned: expected \(5, \d+, 3\)"):
         run_tiers(body, pair, poses, transl, _wavy_coarse, form=CoarseForm(CoarseBase.SKINNED), skinned=skinned[:4])
+
+
+def _pose_reading_model(canonical_poses):
+    """A stand-in garment model that reads every joint's rotation, the root's among them."""
+    from cloth_usd.core.garment_inputs import pose_features
+
+    feats = pose_features(canonical_poses)
+    weights = np.random.default_rng(3).normal(size=(feats.shape[1], 3))
+    return 0.01 * np.tanh(feats @ weights)[:, None, :] * np.ones((1, _pose_reading_model.n, 1))
+
+
+def test_a_garment_model_gives_the_same_local_garment_at_any_heading(shirt):
+    from cloth_usd.core.pipeline import run_garment_model
+
+    body, pair, poses, transl = shirt
+    _pose_reading_model.n = pair.num_vertices
+    ref, _ = run_garment_model(body, pair, poses, transl, _pose_reading_model)
+    for deg in (0.0, 30.0, 137.0, 180.0):
+        p, t, turn = _turned(poses, transl, pair.joints[0], deg)
+        got, _ = run_garment_model(body, pair, p, t, _pose_reading_model)
+        local = turn.inv().apply(got.reshape(-1, 3)).reshape(got.shape)
+        assert np.abs(local - ref).max() < 1e-5  # 1e-2 mm
+    # not vacuous: the stand-in reads the root, so world poses would change its displacement
+    p, _, _ = _turned(poses, transl, pair.joints[0], 137.0)
+    assert np.abs(_pose_reading_model(p) - _pose_reading_model(poses)).max() > 2e-3

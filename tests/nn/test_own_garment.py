@@ -93,8 +93,8 @@ def test_train_garment_makes_a_bundle_that_bakes_the_sample(tmp_path, capsys):
     out = tmp_path / "mine"
     held_out = [{"kind": "arm_raise", "seconds": 1.0, "fps": 30, "seed": 40}]
     (tmp_path / "test_motions.json").write_text(json.dumps(held_out))
-    assert main(["train-garment", str(SAMPLE), "-o", str(out), "--coarse-epochs", "1", "--detail-epochs", "1",
-                 "--batches", "1", "--threads", "1", "--device", "cpu",
+    assert main(["train-garment", str(SAMPLE), "-o", str(out), "--form", "paper", "--coarse-epochs", "1",
+                 "--detail-epochs", "1", "--batches", "1", "--threads", "1", "--device", "cpu",
                  "--test-motions", str(tmp_path / "test_motions.json")]) == 0
     said = capsys.readouterr().out
     assert "wrote bundle" in said and "3516 vertices" in said and "testset.json" in said
@@ -117,6 +117,34 @@ def test_train_garment_makes_a_bundle_that_bakes_the_sample(tmp_path, capsys):
     assert "bundle mine" in capsys.readouterr().err + capsys.readouterr().out or (tmp_path / "c.usdc").is_file()
     # a second call refuses to replace the runs and the bundle, unless forced
     assert main(["train-garment", str(SAMPLE), "-o", str(out)]) == 2
+
+
+@pytest.mark.slow
+def test_train_garment_of_the_garment_form_bakes_the_sample(tmp_path, capsys):
+    """The default form: the sample shirt's own models, baked; the bundle serves that shirt alone."""
+    pytest.importorskip("torch", reason="training needs torch (pip install 'cloth-usd[train]')")
+    from cloth_usd.cli import main
+    from cloth_usd.runtime.bundle import load_bundle
+
+    out = tmp_path / "own"
+    assert main(["train-garment", str(SAMPLE), "-o", str(out), "--steps", "30", "--detail-steps", "10",
+                 "--threads", "1"]) == 0
+    said = capsys.readouterr().out
+    assert "coarse step 30" in said and "detail step 10" in said and "3516 vertices" in said
+    bundle = load_bundle(out)
+    assert bundle.garment is not None and bundle.garment.vertices == 3516
+    timing = json.loads((tmp_path / "own.work" / "timing.json").read_text())
+    assert set(timing) == {"plan", "coarse", "detail", "export", "total"}
+    assert main(["bake", str(SAMPLE), "-o", str(tmp_path / "c.usdc"), "--tier", "detail", "--models", str(out),
+                 "--frames", "1001:1004", "--no-progress", "--strict"]) == 0
+    assert (tmp_path / "c.usdc").is_file()
+    # the Z-up sample wears another shirt (3024 vertices): one line naming it, nothing written
+    other = Path(__file__).resolve().parents[2] / "samples" / "walk_tshirt_zup_cm" / "scene.usda"
+    assert main(["bake", str(other), "-o", str(tmp_path / "d.usdc"), "--tier", "detail", "--models", str(out),
+                 "--frames", "1001:1002", "--no-progress"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "walk_tshirt_zup_cm" in err and "3516" in err and len(err.splitlines()) == 1
+    assert not (tmp_path / "d.usdc").exists()
 
 
 def test_several_garments_each_worn_by_every_body_and_by_their_own(tmp_path):

@@ -1,0 +1,119 @@
+"""Benchmark (not a test): how much each tier looks like cloth, against a Newton test set (issue #12).
+
+For every ``--bundle`` and every sequence of the simulated test set ``--data`` (those whose
+name contains ``--only``; a garment's own bundle measures the sequences that wear its garment),
+per tier (Newton's own frames, skinning, and each bundle's coarse and detail tier before
+the post-process; the mean error also after it):
+
+- error: mean vertex distance to Newton's garment [mm], after and before the post-process;
+- membrane: the simulator's Neo-Hookean membrane energy of the garment (``nn.physics``,
+  the simulator's material), the median frame [J]; bending: the dihedral bending energy [mJ];
+- stretch: each frame's 99th percentile and maximum of edge length over the rest garment's,
+  the median frame's (the issue's targets: p99 <= 1.15, max <= 1.5);
+- inside: the fraction of vertices inside the posed body (the full SMPL mesh) before the
+  post-process.
+
+Energies, stretch and inside are taken on every fifth frame. Writes ``OUT/newton_cloth.md``
+(also printed) and ``OUT/newton_cloth.json``. Needs torch (the energies).
+
+Run: python bench/bench_newton_cloth.py --data TESTSET --bundle B [--bundle ...] [--only shirt1.slim]
+         [--out out/newton_cloth]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from cloth_usd.core.body import posed_vertices
+from cloth_usd.core.garment_inputs import faces_sha256
+from cloth_usd.core.skinning import skin_garment
+from cloth_usd.datagen.simulate import body_side, unique_edges
+from cloth_usd.nn.data import load_dataset
+from cloth_usd.nn.physics import Material, bending_energy, garment_rest, membrane_energy
+from cloth_usd.runtime.bundle import load_bundle
+from cloth_usd.runtime.garment import LearnedGarment
+
+STEP = 5
+
+
+def _measure(acc: dict, clip, body, rest, edges, rest_len, after, before, truth) -> None:
+    every = before[::STEP]
+    acc.setdefault("after", []).append(np.linalg.norm(after - truth, axis=-1).mean(1))
+    acc.setdefault("before", []).append(np.linalg.norm(before - truth, axis=-1).mean(1))
+    x = torch.as_tensor(every)
+    acc.setdefault("membrane", []).append(membrane_energy(x, rest, Material()).numpy())
+    acc.setdefault("bending", []).append(bending_energy(x, rest, Material()).numpy())
+    st = np.linalg.norm(every[:, edges[:, 1]] - every[:, edges[:, 0]], axis=-1) / rest_len
+    acc.setdefault("p99", []).append(np.percentile(st, 99, axis=1))
+    acc.setdefault("max", []).append(st.max(1))
+    bodyv = posed_vertices(body, clip.pair.betas, clip.poses[::STEP], clip.transl[::STEP])
+    acc.setdefault("inside", []).append(np.array([np.mean(body_side(every[k], bodyv[k], body.faces) < 0)
+                                                  for k in range(len(bodyv))]))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--data", required=True, help="a simulated test set (cloth-usd datagen)")
+    ap.add_argument("--bundle", action="append", default=[], help="a model bundle (repeatable)")
+    ap.add_argument("--only", default="", help="measure the sequences whose name contains this")
+    ap.add_argument("--out", default="out/newton_cloth")
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    data = load_dataset(args.data, None)
+    body = data.body
+    clips = [c for c in data.clips if args.only in c.name]
+    bundles = [load_bundle(b) for b in args.bundle]
+    rows: dict[str, dict] = {}
+    for clip in clips:
+        rest = garment_rest(clip.rest_points, clip.pair.faces, Material(), dtype=torch.float64)
+        edges = unique_edges(clip.pair.faces)
+        rest_len = np.linalg.norm(clip.rest_points[edges[:, 1]] - clip.rest_points[edges[:, 0]], axis=-1)
+        truth = clip.positions.astype(np.float64)
+        skinned = skin_garment(clip.pair.binding, clip.poses, clip.transl, body.parents)
+        outs = {"Newton": (truth, truth), "skinning": (skinned, skinned)}
+        for b in bundles:
+            if b.garment is not None and (b.garment.vertices != len(clip.rest_points)
+                                          or b.garment.faces_sha256 != faces_sha256(clip.pair.faces)):
+                continue  # a garment's own bundle serves its garment alone
+            learned = LearnedGarment(b, body, clip.pair.betas, clip.rest_points, clip.pair.faces,
+                                     binding=clip.pair.binding)
+            for tier in [t.value for t in b.tiers]:
+                outs[f"{b.name} {tier}"] = (learned.evaluate(tier, clip.poses, clip.transl, skinned=skinned).points,
+                                            learned.evaluate(tier, clip.poses, clip.transl, skinned=skinned,
+                                                             postprocess=False).points)
+        for label, (after, before) in outs.items():
+            _measure(rows.setdefault(label, {"sequences": set()}), clip, body, rest, edges, rest_len, after, before,
+                     truth)
+            rows[label]["sequences"].add(clip.name)
+        print(f"{clip.name}: " + ", ".join(f"{k} {1000 * np.linalg.norm(a - truth, axis=-1).mean():.2f} mm"
+                                           for k, (a, _) in outs.items()), flush=True)
+    table = {}
+    for label, acc in rows.items():
+        cat = {k: np.concatenate(v) for k, v in acc.items() if k != "sequences"}
+        table[label] = {"sequences": len(acc["sequences"]), "mm_after": 1000 * float(cat["after"].mean()),
+                        "mm_before": 1000 * float(cat["before"].mean()),
+                        "membrane_J": float(np.median(cat["membrane"])),
+                        "bending_mJ": 1000 * float(np.median(cat["bending"])),
+                        "p99_stretch": float(np.median(cat["p99"])), "max_stretch": float(np.median(cat["max"])),
+                        "inside_pct": 100 * float(cat["inside"].mean())}
+    lines = ["| tier | sequences | mm after / before post-process | membrane J | bending mJ | stretch p99 | "
+             "stretch max | inside before |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
+    for label, r in table.items():
+        lines.append(f"| {label} | {r['sequences']} | {r['mm_after']:.2f} / {r['mm_before']:.2f} | "
+                     f"{r['membrane_J']:.1f} | {r['bending_mJ']:.2f} | {r['p99_stretch']:.3f} | "
+                     f"{r['max_stretch']:.2f} | {r['inside_pct']:.2f}% |")
+    text = "\n".join(lines) + "\n"
+    print(text)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "newton_cloth.md").write_text(text)
+    (out / "newton_cloth.json").write_text(json.dumps(table, indent=1) + "\n")
+
+
+if __name__ == "__main__":
+    main()

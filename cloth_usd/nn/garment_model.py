@@ -1,0 +1,438 @@
+"""A model of one garment: its pose-dependent displacement, trained on its own physics
+(``cloth-usd train-garment``'s ``garment`` form).
+
+The paper's models read a garment of any topology through its graph; trained on the
+garment's energy they leave its membrane about where skinning put it (docs/method.md,
+"A garment's own model"). A model of one garment can do what they cannot: a multilayer
+perceptron maps the pose and the body's shape to a displacement of every vertex of this
+garment in its unposed frame, and the garment's own skinning then poses it (SNUG's form,
+Santesteban et al. 2022, without its recurrent state):
+
+    x_n = sum_j w_nj T_j(theta) (X_n + P_n(theta) + d_n(theta, beta))
+
+``X`` the rest garment on the character, ``P`` the pose correctives skinning adds, ``w``
+and ``T`` the garment's skinning weights and joint transforms. Inputs: the 24 joints'
+rotation matrices minus the identity, with the heading taken out of the root (216 numbers,
+:func:`pose_features`; the displacement is in the unposed frame, so a turned character gets
+the same garment turned), and the body's 10 shape coefficients. Its last layer starts at
+zero: an untrained model is the skinned garment.
+
+Two tiers, as the paper's: the coarse model is trained with the stiffer bending the coarse
+tier is trained with (``bending_scale`` 10); the detail model adds a second displacement
+on top of the frozen coarse one, trained with the material's own bending. The detail
+tier's exported file holds both (one model call a frame).
+
+Training needs no simulation: batches of frames of the data set config's planned training
+sequences (the garment carried onto the training bodies), the quasi-static energy of
+:mod:`cloth_usd.nn.physics` (membrane, bending, gravity, the cubic contact against the
+nearest posed body vertex under the garment) minimised with Adam.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import hashlib
+import json
+import logging
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Sequence
+
+import numpy as np
+import torch
+from torch import nn
+
+from ..core.body import BodyModel
+from ..core.garment_inputs import (POSE_FEATURES, SHAPE_FEATURES, faces_sha256, pose_features, shape_features,
+                                   skin_parts)
+from ..core.postprocess import nearest_vertex
+from ..core.scene import Tier
+from ..errors import ArgumentError, ClothUsdError
+
+__all__ = ["GarmentModelConfig", "GarmentNet", "GarmentTiers", "train_garment_model", "load_garment_run",
+           "export_garment_bundle"]
+
+log = logging.getLogger(__name__)
+
+#: A run folder's files.
+RUN, MODEL, HISTORY = "run.json", "model.pt", "history.csv"
+RUN_KIND = "garment-model"
+
+
+@dataclass(frozen=True)
+class GarmentModelConfig:
+    """One garment model's training (a ``cloth-usd train-garment`` run of the ``garment`` form)."""
+
+    hidden: int = 256
+    """Units of each hidden layer."""
+    layers: int = 3
+    """Hidden layers."""
+    steps: int = 3000
+    """Adam steps of ``batch`` frames."""
+    batch: int = 8
+    lr: float = 1e-3
+    lr_final: float = 1e-4
+    """The learning rate decays exponentially from ``lr`` to this over the steps."""
+    bending_scale: float = 1.0
+    """Multiplies the material's bending stiffness (10 for the coarse tier, as the paper's coarse tier)."""
+    contact_margin: float = 0.008
+    """Distance [m] to the body below which the contact term acts (``tshirt-v6``'s)."""
+    output_scale: float = 0.05
+    """The last layer's output times this is the displacement [m]."""
+    val_every: int = 250
+    """Steps between validations; the best validation energy's weights are kept."""
+    seed: int = 0
+
+    def __post_init__(self) -> None:
+        for name in ("hidden", "layers", "steps", "batch", "val_every"):
+            value = getattr(self, name)
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise ArgumentError(f"garment model {name} must be an integer >= 1, got {value!r}")
+        for name in ("lr", "lr_final", "bending_scale", "contact_margin", "output_scale"):
+            value = getattr(self, name)
+            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+                raise ArgumentError(f"garment model {name} must be a number > 0, got {value!r}")
+
+    def to_json(self) -> dict:
+        return dataclasses.asdict(self)
+
+
+class GarmentNet(nn.Module):
+    """Pose (T, 216) and shape (T, 10) -> displacement (T, N, 3) [m] of one garment's vertices."""
+
+    def __init__(self, num_vertices: int, hidden: int = 256, layers: int = 3, output_scale: float = 0.05) -> None:
+        super().__init__()
+        self.num_vertices, self.output_scale = int(num_vertices), float(output_scale)
+        dims = [POSE_FEATURES + SHAPE_FEATURES] + [hidden] * layers
+        blocks: list[nn.Module] = []
+        for a, b in zip(dims[:-1], dims[1:]):
+            blocks += [nn.Linear(a, b), nn.ReLU()]
+        self.body = nn.Sequential(*blocks)
+        self.out = nn.Linear(dims[-1], 3 * self.num_vertices)
+        nn.init.zeros_(self.out.weight)
+        nn.init.zeros_(self.out.bias)
+
+    def forward(self, pose: torch.Tensor, betas: torch.Tensor) -> torch.Tensor:
+        h = self.body(torch.cat([pose, 0.5 * betas], dim=-1))
+        return (self.output_scale * self.out(h)).reshape(pose.shape[0], self.num_vertices, 3)
+
+
+class GarmentTiers(nn.Module):
+    """The detail tier as exported: the frozen coarse displacement plus the detail model's."""
+
+    def __init__(self, coarse: GarmentNet, detail: GarmentNet | None = None) -> None:
+        super().__init__()
+        self.coarse, self.detail = coarse, detail
+
+    def forward(self, pose: torch.Tensor, betas: torch.Tensor) -> torch.Tensor:
+        d = self.coarse(pose, betas)
+        return d if self.detail is None else d + self.detail(pose, betas)
+
+
+@dataclass
+class _Clip:
+    """A planned sequence with what its batches need, made once."""
+
+    source: object
+    """The :class:`~cloth_usd.nn.physics_train.PhysicsClip`."""
+    pose: np.ndarray
+    """(T, 216) pose features."""
+    betas: np.ndarray
+    """(T, 10)."""
+
+
+def _energy(clip, x: torch.Tensor, frames: np.ndarray, body: BodyModel, material) -> dict[str, torch.Tensor]:
+    """(B,) each term of the quasi-static energy [J] of garments ``x`` (B, N, 3) at ``frames``."""
+    from ..core.pipeline import pose_body
+    from .physics import garment_energy
+
+    pair = clip.pair
+    posed = pose_body(body, pair, clip.poses[frames], clip.transl[frames])
+    cloud = pair.patch.contact
+    points, normals = posed.patch_points[:, cloud], posed.patch_normals[:, cloud]
+    nearest = nearest_vertex(x.detach().cpu().numpy(), points)
+    rows = np.arange(len(frames))[:, None]
+    terms = garment_energy(x, clip.rest, material, body_points=torch.from_numpy(points[rows, nearest]).to(x),
+                           body_normals=torch.from_numpy(normals[rows, nearest]).to(x))
+    return {"membrane": terms.membrane, "bending": terms.bending, "gravity": terms.gravity,
+            "contact": terms.contact, "total": terms.total}
+
+
+def _garment(net: nn.Module | None, clip: _Clip, frames: np.ndarray, body: BodyModel,
+             fixed: nn.Module | None = None) -> torch.Tensor:
+    """(B, N, 3) float64 the posed garment of ``net`` (None: no displacement of its own) plus a
+    frozen ``fixed`` displacement [m]."""
+    src = clip.source
+    sk = skin_parts(src.pair.binding, src.poses[frames], src.transl[frames], body.parents)
+    pose, betas = torch.from_numpy(clip.pose[frames]), torch.from_numpy(clip.betas[frames])
+    d = net(pose, betas) if net is not None else torch.zeros(sk.base.shape, dtype=torch.float64)
+    if fixed is not None:
+        with torch.no_grad():
+            frozen = fixed(pose, betas)
+        d = d + frozen
+    return torch.from_numpy(sk.base) + torch.einsum("tnab,tnb->tna", torch.from_numpy(sk.linear), d)
+
+
+def _prepared(clips) -> list[_Clip]:
+    return [_Clip(source=c, pose=pose_features(c.poses), betas=shape_features(c.pair.betas, c.num_frames))
+            for c in clips]
+
+
+def _first(clip) -> int:
+    return min(int(clip.meta.get("warmup_frames", 0)), clip.num_frames - 1)
+
+
+def _validate(net, fixed, clips: Sequence[_Clip], body, material, frames: int = 8) -> tuple[float, float, float]:
+    """Mean energy [J a frame] of the model's garment and of its start (skinned, or the frozen
+    coarse one) over evenly spread validation frames, and the mean distance between them [mm]."""
+    model_e, start_e, mm, n = 0.0, 0.0, 0.0, 0
+    with torch.no_grad():
+        for clip in clips:
+            lo = _first(clip.source)
+            pick = np.unique(np.linspace(lo, clip.source.num_frames - 1, frames).round().astype(np.int64))
+            x = _garment(net, clip, pick, body, fixed)
+            x0 = _garment(None, clip, pick, body, fixed)
+            model_e += float(_energy(clip.source, x, pick, body, material)["total"].sum())
+            start_e += float(_energy(clip.source, x0, pick, body, material)["total"].sum())
+            mm += 1000 * float((x - x0).norm(dim=-1).mean(-1).sum())
+            n += len(pick)
+    return model_e / max(n, 1), start_e / max(n, 1), mm / max(n, 1)
+
+
+def train_garment_model(data_config: str | Path, run_dir: str | Path, config: GarmentModelConfig, *,
+                        tier: Tier | str = Tier.COARSE, coarse_run: str | Path | None = None,
+                        mocap_dir: str | Path | None = None, body: BodyModel | None = None,
+                        physics=None, progress: Callable[[dict], None] | None = None) -> dict:
+    """Train one tier's garment model on a data set config's planned sequences of one garment.
+
+    Args:
+        data_config: a ``cloth-usd datagen`` config whose sequences all wear one garment
+            (``train-garment``'s ``data.json``).
+        run_dir: the run folder to write (``run.json``, ``model.pt``, ``history.csv``).
+        config: the training settings.
+        tier: coarse, or detail (on top of ``coarse_run``'s frozen model).
+        coarse_run: the coarse run (detail only).
+        physics: the config's :class:`~cloth_usd.nn.physics_train.PhysicsSet` when the caller
+            planned it already (the same config, canonical heading).
+        progress: called with each validation's row.
+    Returns:
+        The run's record (what ``run.json`` holds).
+    Raises:
+        ArgumentError: the sequences wear garments of different triangles, no training or
+            validation sequence, a detail run without a coarse run of the same garment.
+    """
+    from ..core.body import load_body_model
+    from .physics_train import physics_set
+
+    tier = Tier(tier)
+    if tier is Tier.SKINNING:
+        raise ArgumentError("train_garment_model: tier must be coarse or detail")
+    if (tier is Tier.DETAIL) != (coarse_run is not None):
+        raise ArgumentError("a garment model's detail tier trains on its coarse run (and only it does): "
+                            "give coarse_run for detail, none for coarse")
+    body = body if body is not None else load_body_model()
+    torch.manual_seed(config.seed)
+    rng = np.random.default_rng(config.seed)
+    began = time.perf_counter()
+    data = physics if physics is not None else physics_set(data_config, body, mocap_dir=mocap_dir)
+    material = dataclasses.replace(data.material, contact_margin=config.contact_margin,
+                                   bend_stiffness=data.material.bend_stiffness * config.bending_scale)
+    train, val = _prepared(data.split("train")), _prepared(data.split("val"))
+    if not train or not val:
+        raise ArgumentError(f"{data_config}: a garment model needs training and validation sequences "
+                            f"(has {len(train)} and {len(val)})")
+    faces = {faces_sha256(c.source.pair.faces) for c in train + val}
+    if len(faces) != 1:
+        raise ArgumentError(f"{data_config}: its sequences wear {len(faces)} different garments; a garment model "
+                            "learns one (train one bundle per garment)")
+    num_vertices = train[0].source.pair.num_vertices
+    fixed = None
+    record_coarse = None
+    if coarse_run is not None:
+        fixed, coarse_info = load_garment_run(coarse_run)
+        if coarse_info["faces_sha256"] != next(iter(faces)):
+            raise ArgumentError(f"--coarse-run {coarse_run}: trained on another garment than {data_config}'s")
+        fixed.eval()
+        record_coarse = {"path": str(Path(coarse_run).resolve()),
+                         "model_sha256": hashlib.sha256((Path(coarse_run) / MODEL).read_bytes()).hexdigest()}
+    net = GarmentNet(num_vertices, config.hidden, config.layers, config.output_scale).double()
+    opt = torch.optim.Adam(net.parameters(), lr=config.lr)
+    decay = (config.lr_final / config.lr) ** (1.0 / max(config.steps, 1))
+    sched = torch.optim.lr_scheduler.ExponentialLR(opt, decay)
+    examples = [(k, t) for k, c in enumerate(train) for t in range(_first(c.source), c.source.num_frames)]
+    run = Path(run_dir)
+    run.mkdir(parents=True, exist_ok=True)
+    rows: list[dict] = []
+    val_e, start_e, val_mm = _validate(net, fixed, val, body, material)
+    best = (val_e, 0, {k: v.clone() for k, v in net.state_dict().items()}, val_mm)
+    rows.append({"step": 0, "seconds": round(time.perf_counter() - began, 1), "train_energy": float("nan"),
+                 "val_energy": val_e, "val_start_energy": start_e, "val_mm": val_mm})
+    if progress is not None:
+        progress(rows[0])
+    acc: list[float] = []
+    for step in range(1, config.steps + 1):
+        k, _ = examples[int(rng.integers(len(examples)))]  # a batch shares one clip (one body)
+        clip = train[k]
+        lo = _first(clip.source)
+        frames = np.sort(rng.integers(lo, clip.source.num_frames, config.batch))
+        x = _garment(net, clip, frames, body, fixed)
+        loss = _energy(clip.source, x, frames, body, material)["total"].mean()
+        if not torch.isfinite(loss):
+            raise ClothUsdError(f"{run}: the energy became {float(loss)} at step {step}; lower lr "
+                                f"({config.lr}) and train again")
+        opt.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(net.parameters(), 1.0)
+        opt.step()
+        sched.step()
+        acc.append(float(loss.detach()))
+        if step % config.val_every == 0 or step == config.steps:
+            val_e, start_e, val_mm = _validate(net, fixed, val, body, material)
+            row = {"step": step, "seconds": round(time.perf_counter() - began, 1),
+                   "train_energy": float(np.mean(acc)), "val_energy": val_e, "val_start_energy": start_e,
+                   "val_mm": val_mm}
+            rows.append(row)
+            acc = []
+            if val_e < best[0]:
+                best = (val_e, step, {k: v.clone() for k, v in net.state_dict().items()}, val_mm)
+            log.info("%s step %d: energy %.2f J a frame (start %.2f), %.2f mm from it", tier.value, step, val_e,
+                     start_e, val_mm)
+            if progress is not None:
+                progress(row)
+    torch.save({"state": best[2], "num_vertices": num_vertices}, run / MODEL)
+    with open(run / HISTORY, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=list(rows[0]))
+        w.writeheader()
+        w.writerows(rows)
+    info = {"kind": RUN_KIND, "tier": tier.value, "config": config.to_json(), "num_vertices": num_vertices,
+            "faces_sha256": next(iter(faces)), "best_step": best[1], "best_val_energy": best[0],
+            "best_val_mm": best[3],
+            "val_start_energy": rows[0]["val_start_energy"], "seconds": round(time.perf_counter() - began, 1),
+            "data": {"path": str(Path(data_config).resolve()), "config_sha256": data.config_sha256,
+                     "train_sequences": len(train), "val_sequences": len(val)},
+            "coarse_run": record_coarse}
+    (run / RUN).write_text(json.dumps(info, indent=1) + "\n")
+    return info
+
+
+def load_garment_run(run_dir: str | Path) -> tuple[GarmentNet, dict]:
+    """A garment model run's best model (float64, eval mode) and its ``run.json`` record.
+
+    Raises:
+        ArgumentError: not a garment model run (one line naming the folder).
+    """
+    run = Path(run_dir)
+    try:
+        info = json.loads((run / RUN).read_text())
+        saved = torch.load(run / MODEL, map_location="cpu", weights_only=True)
+    except (OSError, ValueError, RuntimeError) as exc:
+        raise ArgumentError(f"{run}: not a garment model run ({exc})") from None
+    if not isinstance(info, dict) or info.get("kind") != RUN_KIND:
+        raise ArgumentError(f"{run}: not a garment model run (run.json kind is not '{RUN_KIND}')")
+    cfg = GarmentModelConfig(**info["config"])
+    net = GarmentNet(int(saved["num_vertices"]), cfg.hidden, cfg.layers, cfg.output_scale).double()
+    net.load_state_dict(saved["state"])
+    return net.eval(), info
+
+
+def _export(model: nn.Module, path: Path) -> Path:
+    from ..runtime.io import GARMENT_INPUTS, OUTPUT
+    from .export import OPSET, STACK_TRACE
+
+    model = model.float().eval()
+    example = (torch.zeros(2, POSE_FEATURES), torch.zeros(2, SHAPE_FEATURES))
+    dynamic = tuple({0: torch.export.Dim.DYNAMIC} for _ in GARMENT_INPUTS)
+    with torch.no_grad():
+        program = torch.onnx.export(model, example, input_names=list(GARMENT_INPUTS), output_names=[OUTPUT],
+                                    dynamic_shapes=dynamic, opset_version=OPSET, dynamo=True, optimize=True,
+                                    verbose=False)
+    for node in program.model.graph.all_nodes():
+        node.metadata_props.pop(STACK_TRACE, None)
+    program.save(str(path))
+    return path
+
+
+def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_config: str | Path,
+                          out_dir: str | Path, *, name: str, category: str, description: str = "",
+                          force: bool = False, mocap_dir: str | Path | None = None, body: BodyModel | None = None,
+                          physics=None, tolerance: float = 1e-5) -> Path:
+    """Export a garment's coarse (and detail) model as a verified bundle bound to its triangles.
+
+    The ONNX files are checked against the torch models on the validation sequences' frames
+    (largest displacement difference at most ``tolerance`` [m]); the manifest records the
+    garment's vertex count and triangles' sha256, which a bake checks the scene's garment
+    against, and the training poses' and bodies' ranges.
+    """
+    import tempfile
+
+    from ..core.body import load_body_model
+    from ..core.heading import Heading
+    from ..core.limits import betas_range_record, pose_range_record
+    from ..core.pipeline import CoarseBase, CoarseFeatures, CoarseForm
+    from ..datagen.factory import load_config, train_betas, train_poses
+    from ..runtime.bundle import GarmentIdentity, load_bundle, write_bundle
+    from ..runtime.session import ModelSession
+    from ..runtime.io import OUTPUT
+    from .export import OPSET
+    from .physics_train import physics_set
+
+    body = body if body is not None else load_body_model()
+    coarse, c_info = load_garment_run(coarse_run)
+    detail, d_info = (load_garment_run(detail_run) if detail_run is not None else (None, None))
+    if c_info["tier"] != "coarse" or (d_info is not None and d_info["tier"] != "detail"):
+        raise ArgumentError(f"{coarse_run}, {detail_run}: expected a coarse and a detail garment model run")
+    if d_info is not None and (d_info.get("coarse_run") or {}).get("model_sha256") != hashlib.sha256(
+            (Path(coarse_run) / MODEL).read_bytes()).hexdigest():
+        raise ArgumentError(f"{detail_run}: was trained on another coarse model than {coarse_run}'s")
+    data = physics if physics is not None else physics_set(data_config, body, mocap_dir=mocap_dir)
+    if c_info["data"]["config_sha256"] != data.config_sha256:
+        raise ArgumentError(f"{coarse_run}: trained on another data set config than {data_config}")
+    models = {"coarse": GarmentTiers(coarse)}
+    if detail is not None:
+        models["detail"] = GarmentTiers(coarse, detail)
+    val = _prepared(data.split("val"))
+    with tempfile.TemporaryDirectory(prefix="cloth-usd-export-") as tmp:
+        tmp = Path(tmp)
+        files, worst = {}, {}
+        for tier, model in models.items():
+            files[tier] = _export(model, tmp / f"{tier}.onnx")
+            session = ModelSession(files[tier], prefer_gpu=False)
+            worst[tier] = 0.0
+            for clip in val:
+                pose, betas = clip.pose.astype(np.float32), clip.betas.astype(np.float32)
+                got = session.run({"pose": pose, "betas": betas})[OUTPUT]
+                with torch.no_grad():
+                    want = model.double()(torch.from_numpy(clip.pose), torch.from_numpy(clip.betas)).numpy()
+                model.float()
+                worst[tier] = max(worst[tier], float(np.abs(got - want).max()))
+        if not max(worst.values()) <= tolerance:
+            raise ClothUsdError(f"export parity failed: ONNX and torch differ by {max(worst.values()) * 1000:.4f} "
+                                f"mm on the validation frames (tolerance {tolerance * 1000:.4f} mm); nothing was "
+                                "written")
+        fit = tmp / "fit.npz"
+        data.fit.save(fit)
+        factory = load_config(data_config, mocap_dir=mocap_dir)
+        training = {"manifest_sha256": data.config_sha256,
+                    "description": description or f"{c_info['data']['train_sequences']} planned sequences of "
+                                                  f"{Path(data_config).name}",
+                    "poses": pose_range_record(train_poses(factory, body)),
+                    "bodies": betas_range_record(train_betas(factory))}
+        configs = {"coarse": {"garment_model": c_info["config"], "best_step": c_info["best_step"]}}
+        metrics = {"export_parity": {f"{t}_max_m": v for t, v in worst.items()},
+                   "validation": {"coarse": {"energy": c_info["best_val_energy"],
+                                             "skinned_energy": c_info["val_start_energy"]}}}
+        if d_info is not None:
+            configs["detail"] = {"garment_model": d_info["config"], "best_step": d_info["best_step"]}
+            metrics["validation"]["detail"] = {"energy": d_info["best_val_energy"],
+                                               "coarse_energy": d_info["val_start_energy"]}
+        out = write_bundle(out_dir, name=name, category=category, coarse_onnx=files["coarse"],
+                           detail_onnx=files.get("detail"), fit_npz=fit, configs=configs,
+                           training_data=training, metrics=metrics, opset=OPSET, force=force,
+                           form=CoarseForm(CoarseBase.SKINNED, Heading.CANONICAL, CoarseFeatures.BODY),
+                           garment=GarmentIdentity(vertices=int(c_info["num_vertices"]),
+                                                   faces_sha256=c_info["faces_sha256"]))
+    load_bundle(out)
+    return out

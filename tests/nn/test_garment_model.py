@@ -1,0 +1,173 @@
+"""A garment's own model (nn.garment_model): pose and shape to a displacement of its unposed
+vertices, trained on its physics, exported as a bundle bound to its triangles."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cloth_usd.core.body import load_body_model
+from cloth_usd.core.garment_inputs import faces_sha256, skin_displaced, skin_parts
+from cloth_usd.core.skinning import bind_garment, skin_garment
+from cloth_usd.datagen import TShirtParams, make_tshirt
+from cloth_usd.datagen.factory import OWN_BODY, save_own_garment
+from cloth_usd.errors import ArgumentError, BundleError
+
+torch = pytest.importorskip("torch", reason="training needs torch (pip install 'cloth-usd[train]')")
+
+
+@pytest.fixture(scope="module")
+def own(tmp_path_factory):
+    """A small shirt of a broad body, its config, and coarse and detail runs of a few steps."""
+    from cloth_usd.nn.garment_model import GarmentModelConfig, train_garment_model
+    from cloth_usd.nn.physics_train import physics_set
+
+    body = load_body_model()
+    betas = np.r_[1.0, 1.0, np.zeros(8)]
+    verts, faces = make_tshirt(body, betas, TShirtParams(target_vertices=300))
+    root = tmp_path_factory.mktemp("garment_model")
+    save_own_garment(root / "g.npz", verts, faces, betas)
+    (root / "data.json").write_text(json.dumps({
+        "garment": "g.npz", "bodies": [OWN_BODY, "slim", "short_fat", "tall_thin", "medium_thin"],
+        "test_bodies": ["medium_thin"], "max_frames": 12,
+        "train_motions": [{"kind": "arm_raise", "seconds": 1.0, "seed": 0}],
+        "test_motions": [{"kind": "arm_raise", "seconds": 1.0, "seed": 5}]}))
+    data = physics_set(root / "data.json", body)
+    rows = {"coarse": [], "detail": []}
+    infos = {}
+    for tier in ("coarse", "detail"):
+        cfg = GarmentModelConfig(steps=40 if tier == "coarse" else 20, val_every=10, hidden=32, layers=2,
+                                 bending_scale=10.0 if tier == "coarse" else 1.0)
+        infos[tier] = train_garment_model(root / "data.json", root / tier, cfg, tier=tier, body=body, physics=data,
+                                          coarse_run=root / "coarse" if tier == "detail" else None,
+                                          progress=rows[tier].append)
+    return root, body, data, verts, faces, betas, rows, infos
+
+
+def test_skinning_a_displacement_is_skinning_the_displaced_rest_garment():
+    body = load_body_model()
+    betas = np.r_[0.5, -1.0, np.zeros(8)]
+    verts, faces = make_tshirt(body, betas, TShirtParams(target_vertices=300))
+    binding = bind_garment(body, betas, verts)
+    rng = np.random.default_rng(0)
+    poses, transl = rng.normal(0.0, 0.3, (3, 72)), rng.normal(0.0, 0.5, (3, 3))
+    zero = np.zeros((3, len(verts), 3))
+    np.testing.assert_allclose(skin_displaced(binding, poses, transl, body.parents, zero),
+                               skin_garment(binding, poses, transl, body.parents), atol=1e-12)
+    d = rng.normal(0.0, 0.01, zero.shape)
+    parts = skin_parts(binding, poses, transl, body.parents)
+    moved = skin_displaced(binding, poses, transl, body.parents, d)
+    np.testing.assert_allclose(parts.base + np.einsum("tnab,tnb->tna", parts.linear, d), moved, atol=1e-12)
+    # a rigid displacement of every vertex is turned with the bones, not added in the world
+    assert np.abs(moved - parts.base - d).max() > 1e-4
+
+
+def test_an_untrained_model_is_the_skinned_garment_and_training_lowers_its_energy(own):
+    root, *_, rows, infos = own
+    coarse = rows["coarse"]
+    assert coarse[0]["step"] == 0 and coarse[0]["val_mm"] == 0.0
+    assert coarse[0]["val_energy"] == pytest.approx(coarse[0]["val_start_energy"])
+    assert infos["coarse"]["best_val_energy"] < 0.8 * infos["coarse"]["val_start_energy"]
+    assert infos["coarse"]["best_val_mm"] > 0.1  # it moved the garment
+    # the detail model starts from the coarse garment, under the material's own bending
+    detail = rows["detail"]
+    assert detail[0]["val_mm"] == 0.0 and infos["detail"]["best_val_energy"] <= detail[0]["val_start_energy"]
+    run = json.loads((root / "coarse" / "run.json").read_text())
+    assert run["kind"] == "garment-model" and run["tier"] == "coarse" and run["faces_sha256"] == faces_sha256(own[4])
+
+
+def test_export_writes_a_bundle_bound_to_the_garment_that_animates_it(own, tmp_path):
+    from cloth_usd.nn.garment_model import export_garment_bundle
+    from cloth_usd.runtime.bundle import load_bundle
+    from cloth_usd.runtime.garment import LearnedGarment
+    from cloth_usd.datagen import walk_cycle
+
+    root, body, data, verts, faces, betas, _, _ = own
+    out = export_garment_bundle(root / "coarse", root / "detail", root / "data.json", tmp_path / "b", name="mine",
+                                category="tshirt", body=body, physics=data)
+    bundle = load_bundle(out)
+    assert bundle.garment.vertices == len(verts) and bundle.garment.faces_sha256 == faces_sha256(faces)
+    assert bundle.manifest["models"]["detail"]["inputs"] == ["pose", "betas"]
+    parity = bundle.manifest["metrics"]["export_parity"]
+    assert max(parity.values()) <= 1e-5
+    poses, transl = walk_cycle(4)
+    garment = LearnedGarment(bundle, body, betas, verts, faces)
+    skinned = skin_garment(garment.binding, poses, transl, body.parents)
+    coarse = garment.evaluate("coarse", poses, transl, postprocess=False).points
+    detail = garment.evaluate("detail", poses, transl, postprocess=False).points
+    assert 1e-4 < np.abs(coarse - skinned).max() < 0.15 and np.abs(detail - coarse).max() > 1e-6
+    # another garment's triangles are refused in one line naming the bundle
+    with pytest.raises(BundleError, match="mine") as err:  # the same points, one triangle fewer
+        LearnedGarment(bundle, body, betas, verts, faces[1:])
+    assert "\n" not in str(err.value) and "train-garment" in str(err.value)
+
+
+def test_a_detail_run_needs_its_coarse_run_and_one_garment(own, tmp_path):
+    from cloth_usd.nn.garment_model import GarmentModelConfig, train_garment_model
+
+    root, body, data, *_ = own
+    with pytest.raises(ArgumentError, match="coarse_run"):
+        train_garment_model(root / "data.json", tmp_path / "d", GarmentModelConfig(steps=1), tier="detail",
+                            body=body, physics=data)
+    with pytest.raises(ArgumentError, match="lr"):
+        GarmentModelConfig(lr=0.0)
+
+
+def test_train_garment_refuses_several_garments_for_the_garment_form(tmp_path, capsys):
+    from pathlib import Path
+
+    from cloth_usd.cli import main
+
+    sample = Path(__file__).resolve().parents[2] / "samples" / "walk_tshirt" / "scene.usda"
+    assert main(["train-garment", str(sample), str(sample), "-o", str(tmp_path / "b"), "--form", "garment"]) == 2
+    err = capsys.readouterr().err
+    assert "--form paper" in err and len(err.strip().splitlines()) == 1 and not (tmp_path / "b").exists()
+
+
+def test_evaluate_measures_the_sequences_that_wear_the_bundles_garment(tmp_path_factory, tmp_path, caplog):
+    """A test set of several garments: a garment's own bundle is measured on its garment's
+    sequences alone, and a test set without that garment is one line naming it."""
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures, CoarseForm
+    from cloth_usd.core.heading import Heading
+    from cloth_usd.evaluate import evaluate_bundle
+    from cloth_usd.nn.data import load_dataset
+    from cloth_usd.nn.garment_model import GarmentNet, GarmentTiers, _export
+    from cloth_usd.runtime.bundle import GarmentIdentity, write_bundle
+
+    spec = importlib.util.spec_from_file_location("train_data", Path(__file__).parent / "train_data.py")
+    helpers = sys.modules.get("train_data")
+    if helpers is None:
+        helpers = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(helpers)
+        sys.modules["train_data"] = helpers
+    data = helpers.tiny_dataset(tmp_path_factory)
+    clips = load_dataset(data, None).clips
+    garments = {faces_sha256(c.pair.faces): c for c in clips}
+    assert len(garments) > 1  # the tiny set wears several shirts
+    clip = clips[0]
+    n, sha = len(clip.rest_points), faces_sha256(clip.pair.faces)
+    worn = sum(1 for c in clips if faces_sha256(c.pair.faces) == sha and c.split.value.startswith("test"))
+
+    def bundle(identity, name):
+        model = tmp_path / f"{name}.onnx"
+        _export(GarmentTiers(GarmentNet(identity.vertices, hidden=8, layers=1)), model)
+        (tmp_path / "fit.npz").write_bytes((data / "fit.npz").read_bytes())
+        return write_bundle(tmp_path / name, name=name, category="tshirt", coarse_onnx=model, detail_onnx=None,
+                            fit_npz=tmp_path / "fit.npz", configs={}, training_data={}, metrics={}, opset=18,
+                            form=CoarseForm(CoarseBase.SKINNED, Heading.CANONICAL, CoarseFeatures.BODY),
+                            garment=identity)
+
+    report = evaluate_bundle(data, bundle(GarmentIdentity(n, sha), "own"), tmp_path / "report", max_frames=3)
+    assert report.rows[-1]["sequences"] == worn
+    # an untrained garment model is the skinned garment: its coarse tier is skinning's error (after the post-process)
+    row = report.rows[-1]["mean_mm"]
+    assert abs(row["coarse"] - row["skinning"]) < 2.0
+    with pytest.raises(ArgumentError, match="no sequence wears") as err:
+        evaluate_bundle(data, bundle(GarmentIdentity(n + 1, sha), "other"), tmp_path / "report2", max_frames=3)
+    assert "\n" not in str(err.value)
