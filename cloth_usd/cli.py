@@ -528,8 +528,7 @@ def _train_garment(args: argparse.Namespace) -> int:
     from .usd.read import open_stage, read_scene
 
     plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches,
-                          form=args.form or ("garment" if len(args.scene) == 1 else "paper"), steps=args.steps,
-                          detail_steps=args.detail_steps)
+                          form=args.form, steps=args.steps, detail_steps=args.detail_steps)
 
     def motion_list(flag: str, path: str | None) -> tuple:
         if not path:

@@ -327,11 +327,16 @@ def load_garment_run(run_dir: str | Path) -> tuple[GarmentNet, dict]:
     run = Path(run_dir)
     try:
         info = json.loads((run / RUN).read_text())
-        saved = torch.load(run / MODEL, map_location="cpu", weights_only=True)
-    except (OSError, ValueError, RuntimeError) as exc:
+    except (OSError, ValueError) as exc:
         raise ArgumentError(f"{run}: not a garment model run ({exc})") from None
     if not isinstance(info, dict) or info.get("kind") != RUN_KIND:
         raise ArgumentError(f"{run}: not a garment model run (run.json kind is not '{RUN_KIND}')")
+    try:
+        saved = torch.load(run / MODEL, map_location="cpu", weights_only=True)
+    except Exception as exc:  # noqa: BLE001 - torch.load raises unpickling and runtime errors alike
+        raise ArgumentError(f"{run}: {MODEL} is not a garment model ({' '.join(str(exc).split())[:200]})") from None
+    if not isinstance(saved, dict) or not {"state", "num_vertices"} <= saved.keys():
+        raise ArgumentError(f"{run}: {MODEL} is not a garment model (no state and num_vertices)")
     cfg = GarmentModelConfig(**info["config"])
     net = GarmentNet(int(saved["num_vertices"]), cfg.hidden, cfg.layers, cfg.output_scale).double()
     net.load_state_dict(saved["state"])

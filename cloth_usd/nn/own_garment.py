@@ -91,17 +91,18 @@ class OwnGarmentPlan:
     detail_width: float = 0.125
     """The detail model's width."""
     seed: int = 0
-    form: str = "garment"
+    form: str | None = None
     """``garment``: the garment's own models (:mod:`cloth_usd.nn.garment_model`, one garment,
     ``steps`` and ``detail_steps``); ``paper``: the paper's graph models (any topology, several
-    garments of a category; ``coarse_epochs``, ``detail_epochs`` and ``batches``)."""
+    garments of a category; ``coarse_epochs``, ``detail_epochs`` and ``batches``); None: garment
+    for one garment, paper for several."""
     steps: int = 3000
     """The garment form's coarse model: Adam steps of 8 frames."""
     detail_steps: int = 1500
     """The garment form's detail model: Adam steps of 8 frames."""
 
     def __post_init__(self) -> None:
-        if self.form not in FORMS:
+        if self.form is not None and self.form not in FORMS:
             raise ArgumentError(f"--form must be one of {', '.join(FORMS)}, got {self.form!r}")
         for name in ("coarse_epochs", "detail_epochs", "batches", "steps", "detail_steps"):
             value = getattr(self, name)
@@ -193,7 +194,8 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
 
     if not garments:
         raise ArgumentError("train-garment: no garment given")
-    if plan.form == "garment" and len(garments) > 1:
+    form = plan.form or ("garment" if len(garments) == 1 else "paper")
+    if form == "garment" and len(garments) > 1:
         raise ArgumentError(f"train-garment: {len(garments)} garments given; the garment form learns one garment "
                             "(--form paper trains one bundle for several of a category)")
     categories = sorted({Category(g.category).value for g in garments})
@@ -227,7 +229,7 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
                                          "train_motions": list(PROCEDURAL_MOTIONS),
                                          "test_motions": list(test_motions or TEST_MOTIONS),
                                          "simulate_splits": list(TEST_SET_SPLITS)})
-    if plan.form == "garment":
+    if form == "garment":
         return _train_garment_form(garments[0], work, out_dir, runs, name=name, category=category, plan=plan,
                                    force=force, body=body, mocap_dir=mocap_dir, progress=progress)
     _write_json(work / "coarse.json", plan.coarse_config())

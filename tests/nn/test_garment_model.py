@@ -171,3 +171,20 @@ def test_evaluate_measures_the_sequences_that_wear_the_bundles_garment(tmp_path_
     with pytest.raises(ArgumentError, match="no sequence wears") as err:
         evaluate_bundle(data, bundle(GarmentIdentity(n + 1, sha), "other"), tmp_path / "report2", max_frames=3)
     assert "\n" not in str(err.value)
+
+
+def test_a_broken_run_is_one_line_naming_it(own, tmp_path):
+    import shutil
+
+    from cloth_usd.nn.garment_model import load_garment_run
+
+    root = own[0]
+    run = tmp_path / "run"
+    shutil.copytree(root / "coarse", run)
+    (run / "model.pt").write_bytes(b"not a model")
+    with pytest.raises(ArgumentError, match="model.pt") as err:
+        load_garment_run(run)
+    assert "\n" not in str(err.value)
+    (run / "run.json").write_text('{"kind": "coarse"}')
+    with pytest.raises(ArgumentError, match="not a garment model run"):
+        load_garment_run(run)
