@@ -30,7 +30,6 @@ import numpy as np
 import torch
 
 from cloth_usd.core.body import posed_vertices
-from cloth_usd.core.garment_inputs import faces_sha256
 from cloth_usd.core.skinning import skin_garment
 from cloth_usd.datagen.simulate import body_side, unique_edges
 from cloth_usd.nn.data import load_dataset
@@ -77,8 +76,7 @@ def main() -> None:
         skinned = skin_garment(clip.pair.binding, clip.poses, clip.transl, body.parents)
         outs = {"Newton": (truth, truth), "skinning": (skinned, skinned)}
         for b in bundles:
-            if b.garment is not None and (b.garment.vertices != len(clip.rest_points)
-                                          or b.garment.faces_sha256 != faces_sha256(clip.pair.faces)):
+            if b.garment is not None and not b.garment.serves(len(clip.rest_points), clip.pair.faces):
                 continue  # a garment's own bundle serves its garment alone
             learned = LearnedGarment(b, body, clip.pair.betas, clip.rest_points, clip.pair.faces,
                                      binding=clip.pair.binding)

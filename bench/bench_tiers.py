@@ -185,15 +185,13 @@ def _time_frames(fn, frames: int, repeats: int) -> list[float]:
 def stage_garment(path: Path, body) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """``(rest points in the canonical body frame, triangles, betas)`` of a stage's only garment."""
     from cloth_usd.core.body import shape_body
-    from cloth_usd.core.frames import canonical_rest_points, rest_orientation
+    from cloth_usd.core.frames import worn_rest_points
     from cloth_usd.usd.read import open_stage, read_scene
 
     scene = read_scene(open_stage(path))
     garment = scene.garments[0]
     char = next(c for c in scene.characters if c.prim_path == garment.body_path)
-    joints = shape_body(body, char.betas)[1]
-    rest = canonical_rest_points(garment.rest_points, char.rest_root_position,
-                                 rest_orientation(char.rest_joints, joints), joints)
+    rest = worn_rest_points(char, garment.rest_points, shape_body(body, char.betas)[1])
     return rest, np.asarray(garment.triangles, dtype=np.int64), np.asarray(char.betas, dtype=np.float64)
 
 

@@ -521,7 +521,7 @@ def _train_garment(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .core.body import load_body_model, shape_body
-    from .core.frames import canonical_rest_points, rest_orientation
+    from .core.frames import worn_rest_points
     from .datagen.factory import OwnGarment
     from .errors import ArgumentError
     from .nn.own_garment import TEST_SET_CONFIG, OwnGarmentPlan, train_own_garment
@@ -554,9 +554,7 @@ def _train_garment(args: argparse.Namespace) -> int:
                                 else f"name the garment with --garment (garments: {found})"))
         garment = garments[0]
         char = next(c for c in scene.characters if c.prim_path == garment.body_path)
-        joints = shape_body(body, char.betas)[1]
-        rest = canonical_rest_points(garment.rest_points, char.rest_root_position,
-                                     rest_orientation(char.rest_joints, joints), joints)
+        rest = worn_rest_points(char, garment.rest_points, shape_body(body, char.betas)[1])
         if owns and garment.category.value != owns[0].category:
             raise ArgumentError(f"{path} <{garment.prim_path}>: a {garment.category.value}, but {args.scene[0]}'s "
                                 f"garment is a {owns[0].category}: one bundle serves one category")

@@ -192,14 +192,10 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         raise ArgumentError(f"--data {data_dir}: no accepted sequences in the splits {', '.join(splits)}")
     body = data.body
     if bundle_obj.garment is not None:  # a garment's own bundle: the sequences that wear that garment
-        from .core.garment_inputs import faces_sha256
-
-        ident = bundle_obj.garment
-        worn = [c for c in clips if c.rest_points.shape[0] == ident.vertices
-                and faces_sha256(c.pair.faces) == ident.faces_sha256]
+        worn = [c for c in clips if bundle_obj.garment.serves(len(c.rest_points), c.pair.faces)]
         if not worn:
             raise ArgumentError(f"--data {data_dir}: no sequence wears the garment bundle '{bundle_obj.name}' was "
-                                f"trained for ({ident.vertices} vertices)")
+                                f"trained for ({bundle_obj.garment.vertices} vertices)")
         if len(worn) < len(clips):
             log.warning("%s: %d of %d sequences wear other garments than bundle '%s''s; measuring the %d that wear "
                         "its own", data_dir, len(clips) - len(worn), len(clips), bundle_obj.name, len(worn))

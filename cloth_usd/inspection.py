@@ -103,7 +103,7 @@ def _body_warnings(scene: Scene, body_model: str | PathLike | None, problems: li
     """A line for each garment inside its shaped body or far from it at rest (problems: see
     :func:`_worn_bodies`)."""
     from .core.body import shape_body
-    from .core.frames import canonical_rest_points, rest_orientation
+    from .core.frames import worn_rest_points
     from .core.plausibility import body_notes
     from .core.skinning import bind_worn
 
@@ -115,9 +115,7 @@ def _body_warnings(scene: Scene, body_model: str | PathLike | None, problems: li
         if body is None:
             continue
         char = characters[g.body_path]
-        joints = shape_body(body, char.betas)[1]
-        rest = canonical_rest_points(g.rest_points, char.rest_root_position,
-                                     rest_orientation(char.rest_joints, joints), joints)
+        rest = worn_rest_points(char, g.rest_points, shape_body(body, char.betas)[1])
         binding = bind_worn(body, char.betas, rest, g.triangles, g.category)
         lines += [f"{g.prim_path}: {note}" for note in body_notes(binding, body, char.betas, char.prim_path)]
     return lines

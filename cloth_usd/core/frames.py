@@ -16,7 +16,8 @@ from .rotations import axis_angle_to_matrix, matrix_to_axis_angle
 from .scene import Character, Motion
 from .smpl import NUM_JOINTS
 
-__all__ = ["body_frame", "rest_orientation", "reorient_poses", "CanonicalMotion", "canonical_motion", "canonical_rest_points"]
+__all__ = ["body_frame", "rest_orientation", "reorient_poses", "CanonicalMotion", "canonical_motion", "canonical_rest_points",
+           "worn_rest_points"]
 
 _PELVIS, _L_HIP, _R_HIP, _NECK, _L_SHOULDER, _R_SHOULDER = 0, 1, 2, 12, 16, 17
 
@@ -106,6 +107,18 @@ def canonical_rest_points(world_points: np.ndarray, rest_root_position: np.ndarr
         (N, 3) float64 [m], canonical body frame.
     """
     return (np.asarray(world_points, dtype=np.float64) - rest_root_position) @ turn + joints[0]
+
+
+def worn_rest_points(character: Character, world_points: np.ndarray, joints: np.ndarray) -> np.ndarray:
+    """A garment's world rest points, worn by ``character``, in the canonical body frame
+    (:func:`canonical_rest_points` with the character's rest pelvis and turn).
+
+    Args:
+        world_points: (N, 3) [m], internal world frame.
+        joints: (J, 3) the body model's ``J(betas)`` of the character's shape [m].
+    """
+    return canonical_rest_points(world_points, character.rest_root_position,
+                                 rest_orientation(character.rest_joints, joints), joints)
 
 
 def canonical_motion(character: Character, motion: Motion, joints: np.ndarray) -> CanonicalMotion:

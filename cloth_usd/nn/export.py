@@ -50,8 +50,9 @@ def _example(model: CoarseGenerator | DetailGenerator) -> tuple[dict[str, torch.
 
 
 def _dynamic_axes(name: str, ndim: int) -> range:
-    """Dynamic axes of an input: all but the feature axis of ``features`` / ``attributes``."""
-    return range(ndim - 1) if name in ("features", "attributes") else range(ndim)
+    """Dynamic axes of an input: all but the feature axis of ``features`` / ``attributes`` (and
+    of a garment's own model's ``pose`` / ``betas``)."""
+    return range(ndim - 1) if name in ("features", "attributes", "pose", "betas") else range(ndim)
 
 
 def _export(model: torch.nn.Module, names: tuple[str, ...], path: Path,

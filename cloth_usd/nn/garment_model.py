@@ -30,6 +30,7 @@ nearest posed body vertex under the garment) minimised with Adam.
 
 from __future__ import annotations
 
+import copy
 import csv
 import dataclasses
 import hashlib
@@ -344,20 +345,12 @@ def load_garment_run(run_dir: str | Path) -> tuple[GarmentNet, dict]:
 
 
 def _export(model: nn.Module, path: Path) -> Path:
-    from ..runtime.io import GARMENT_INPUTS, OUTPUT
-    from .export import OPSET, STACK_TRACE
+    """``model`` (made float32 in place) as ONNX at ``path``, as :mod:`cloth_usd.nn.export` exports the graph models."""
+    from ..runtime.io import GARMENT_INPUTS
+    from .export import _export as export_onnx
 
-    model = model.float().eval()
-    example = (torch.zeros(2, POSE_FEATURES), torch.zeros(2, SHAPE_FEATURES))
-    dynamic = tuple({0: torch.export.Dim.DYNAMIC} for _ in GARMENT_INPUTS)
-    with torch.no_grad():
-        program = torch.onnx.export(model, example, input_names=list(GARMENT_INPUTS), output_names=[OUTPUT],
-                                    dynamic_shapes=dynamic, opset_version=OPSET, dynamo=True, optimize=True,
-                                    verbose=False)
-    for node in program.model.graph.all_nodes():
-        node.metadata_props.pop(STACK_TRACE, None)
-    program.save(str(path))
-    return path
+    example = {"pose": torch.zeros(2, POSE_FEATURES), "betas": torch.zeros(2, SHAPE_FEATURES)}
+    return export_onnx(model.float(), GARMENT_INPUTS, Path(path), example)
 
 
 def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_config: str | Path,
@@ -405,13 +398,13 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
         for tier, model in models.items():
             files[tier] = _export(model, tmp / f"{tier}.onnx")
             session = ModelSession(files[tier], prefer_gpu=False)
+            reference = copy.deepcopy(model).double()  # the float64 torch model the file is checked against
             worst[tier] = 0.0
             for clip in val:
                 pose, betas = clip.pose.astype(np.float32), clip.betas.astype(np.float32)
                 got = session.run({"pose": pose, "betas": betas})[OUTPUT]
                 with torch.no_grad():
-                    want = model.double()(torch.from_numpy(clip.pose), torch.from_numpy(clip.betas)).numpy()
-                model.float()
+                    want = reference(torch.from_numpy(clip.pose), torch.from_numpy(clip.betas)).numpy()
                 worst[tier] = max(worst[tier], float(np.abs(got - want).max()))
         if not max(worst.values()) <= tolerance:
             raise ClothUsdError(f"export parity failed: ONNX and torch differ by {max(worst.values()) * 1000:.4f} "

@@ -36,6 +36,7 @@ import numpy as np
 
 from ..core.files import file_sha256, models_dir
 from ..core.fit import FitModel
+from ..core.garment_inputs import faces_sha256
 from ..core.heading import Heading
 from ..core.limits import betas_range_from_record, pose_range_from_record
 from ..core.pipeline import CoarseBase, CoarseFeatures, CoarseForm
@@ -63,7 +64,11 @@ class GarmentIdentity:
     vertices: int
     """N."""
     faces_sha256: str
-    """sha256 of its (M, 3) triangles as int64 (:func:`cloth_usd.nn.garment_model.faces_sha256`)."""
+    """sha256 of its (M, 3) triangles as int64 (:func:`cloth_usd.core.garment_inputs.faces_sha256`)."""
+
+    def serves(self, num_vertices: int, faces: np.ndarray) -> bool:
+        """Whether a garment of ``num_vertices`` vertices and these (M, 3) triangles is this one."""
+        return int(num_vertices) == self.vertices and faces_sha256(faces) == self.faces_sha256
 
     def to_json(self) -> dict:
         return {"vertices": int(self.vertices), "faces_sha256": str(self.faces_sha256)}

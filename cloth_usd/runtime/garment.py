@@ -63,6 +63,11 @@ class LearnedGarment:
         self.bundle = bundle
         self.body = body
         self.margin = float(margin) if margin is not None else garment_margin(rest_points, faces)
+        if bundle.garment is not None and not bundle.garment.serves(len(rest_points), faces):
+            raise BundleError(f"{bundle.path}: bundle '{bundle.name}' was trained for one garment of "
+                              f"{bundle.garment.vertices} vertices, and this garment ({len(rest_points)} vertices) is "
+                              "not it (other triangles); bake it with its category's bundle or train one for it "
+                              "with cloth-usd train-garment")
         fit = bundle.fit
         if fit.anchors.size and int(fit.anchors.max()) >= body.num_vertices:
             raise BundleError(f"{bundle.path}: the fit model's anchors index body vertices up to "
@@ -79,15 +84,6 @@ class LearnedGarment:
         """(F,) the pair's fit attribute alpha (F = 3)."""
         self.own = bundle.garment is not None
         """True for a garment's own bundle (its model serves this garment's triangles alone)."""
-        if self.own:
-            from ..core.garment_inputs import faces_sha256
-
-            ident = bundle.garment
-            if len(rest_points) != ident.vertices or faces_sha256(self.faces) != ident.faces_sha256:
-                raise BundleError(f"{bundle.path}: bundle '{bundle.name}' was trained for one garment of "
-                                  f"{ident.vertices} vertices, and this garment ({len(rest_points)} vertices) is not "
-                                  "it (other triangles); bake it with its category's bundle or train one for it "
-                                  "with cloth-usd train-garment")
         if self.alpha.shape != (3,):
             raise BundleError(f"{bundle.path}: the fit model has {self.alpha.shape[0]} factors, "
                               "the models take 3")
