@@ -115,8 +115,8 @@ def main(argv=None) -> int:
     garment = read_scene(open_stage(args.garment)).garments[0]  # the garment, as the baker reads it
     if args.bundle:
         bundles = args.bundle
-    else:  # what a bake would run: the shipped default for the garment's category
-        shipped = find_bundle(garment.category)
+    else:  # what a bake would run: the shipped bundle of this garment, else of its category
+        shipped = find_bundle(garment.category, worn=(len(garment.rest_points), garment.triangles))
         if shipped is None:
             ap.error(f"no shipped bundle for a {garment.category.value}; name one with --bundle")
         bundles = [str(shipped.path)]

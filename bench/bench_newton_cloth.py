@@ -3,7 +3,9 @@
 For every ``--bundle`` and every sequence of the simulated test set ``--data`` (those whose
 name contains ``--only``; a garment's own bundle measures the sequences that wear its garment),
 per tier (Newton's own frames, skinning, and each bundle's coarse and detail tier before
-the post-process; the mean error also after it):
+the post-process; the mean error also after it). A garment's own bundle reads the rest it
+was trained on (``cloth_usd.evaluate.garment_reads``): when that is the garment as authored,
+before the drape, a row "skinning, authored" skins that one as well:
 
 - error: mean vertex distance to Newton's garment [mm], after and before the post-process;
 - membrane: the simulator's Neo-Hookean membrane energy of the garment (``nn.physics``,
@@ -35,7 +37,7 @@ from cloth_usd.datagen.simulate import body_side, unique_edges
 from cloth_usd.nn.data import load_dataset
 from cloth_usd.nn.physics import Material, bending_energy, garment_rest, membrane_energy
 from cloth_usd.runtime.bundle import load_bundle
-from cloth_usd.runtime.garment import LearnedGarment
+from cloth_usd.evaluate import garment_reads, learned_garment
 
 STEP = 5
 
@@ -67,6 +69,7 @@ def main() -> None:
     body = data.body
     clips = [c for c in data.clips if args.only in c.name]
     bundles = [load_bundle(b) for b in args.bundle]
+    reads = {b.name: garment_reads(b, data.clips) for b in bundles}  # the rest each bundle reads
     rows: dict[str, dict] = {}
     for clip in clips:
         rest = garment_rest(clip.rest_points, clip.pair.faces, Material(), dtype=torch.float64)
@@ -78,8 +81,10 @@ def main() -> None:
         for b in bundles:
             if b.garment is not None and not b.garment.serves(len(clip.rest_points), clip.pair.faces):
                 continue  # a garment's own bundle serves its garment alone
-            learned = LearnedGarment(b, body, clip.pair.betas, clip.rest_points, clip.pair.faces,
-                                     binding=clip.pair.binding)
+            learned = learned_garment(b, body, clip, reads[b.name])
+            if reads[b.name] == "authored" and clip.authored_points is not None:  # the garment before the drape
+                authored = skin_garment(learned.binding, clip.poses, clip.transl, body.parents)
+                outs.setdefault("skinning, authored", (authored, authored))
             for tier in [t.value for t in b.tiers]:
                 outs[f"{b.name} {tier}"] = (learned.evaluate(tier, clip.poses, clip.transl, skinned=skinned).points,
                                             learned.evaluate(tier, clip.poses, clip.transl, skinned=skinned,

@@ -144,7 +144,8 @@ def quantize_bundle(bundle, out_dir: Path) -> tuple[Path | None, dict[str, str]]
                         configs={t: e.get("config", {}) for t, e in m["models"].items()},
                         training_data=m.get("training_data", {}),
                         metrics={"note": "int8 dynamic quantization of " + str(bundle.path)},
-                        opset=int(m.get("opset", 18)), form=bundle.form, garment=bundle.garment)
+                        opset=int(m.get("opset", 18)), form=bundle.form, garment=bundle.garment,
+                        detail_adds_coarse=bundle.detail_adds_coarse)
     return path, failed
 
 

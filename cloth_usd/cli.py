@@ -42,6 +42,9 @@ def _parser() -> argparse.ArgumentParser:
     i.add_argument("scene", help="USD stage to read")
     i.add_argument("--joint-map", metavar="FILE", help=_JOINT_MAP_HELP)
     i.add_argument("--body-model", help="SMPL-format .npz/.pkl file or folder the bake will use (default: embedded)")
+    i.add_argument("--models", metavar="DIR",
+                   help="the bake's model bundle folder, to name the bundle each garment's learned tiers would use "
+                        "(default: the shipped models/bundles)")
 
     b = add_command("bake", help="write a garment point-cache layer")
     b.add_argument("scene", help="USD stage to read (never modified)")
@@ -153,7 +156,8 @@ def _parser() -> argparse.ArgumentParser:
                                            "simulation)")
     tg.add_argument("scene", nargs="+", help="USD stage(s), each with the garment (a cloth:category Mesh on an SMPL "
                                              "character); several train one bundle for their category")
-    tg.add_argument("-o", "--out", required=True, help="bundle folder to write (bake with --models OUT)")
+    tg.add_argument("-o", "--out", required=True, help="bundle folder to write (bake with --models OUT; in a folder of "
+                                                       "bundles it comes first for this garment)")
     tg.add_argument("--garment", metavar="PRIM", help="the garment prim (default: each stage's only garment)")
     tg.add_argument("--name", help="bundle name (default: the bundle folder's name)")
     tg.add_argument("--work", metavar="DIR", help="folder for the data config and the two runs (default: OUT.work)")
@@ -182,7 +186,8 @@ def _parser() -> argparse.ArgumentParser:
     tg.add_argument("--force", action="store_true", help="replace the bundle and the runs of an earlier call")
 
     ex = add_command("export", help="export trained runs to ONNX and write a verified model bundle")
-    ex.add_argument("--coarse-run", required=True, help="trained coarse run folder")
+    ex.add_argument("--coarse-run", required=True, help="trained coarse run folder (or a train-garment work "
+                                                        "folder's coarse run, with --data its data.json)")
     ex.add_argument("--detail-run", help="trained detail run folder (optional)")
     ex.add_argument("--data", required=True, help="the data set the runs were trained on (fit.npz, manifest), or "
                                                   "the data set config of a physics-trained coarse run")
@@ -307,7 +312,8 @@ def _datagen(args: argparse.Namespace) -> int:
 def _inspect(args: argparse.Namespace) -> int:
     from .inspection import format_report, inspect_stage
 
-    report = inspect_stage(args.scene, joint_map=args.joint_map, body_model=args.body_model)
+    report = inspect_stage(args.scene, joint_map=args.joint_map, body_model=args.body_model,
+                           models=None if args.models is None else [args.models])
     sys.stdout.write(format_report(report) + "\n")
     return 1 if report.problems else 0
 
@@ -493,13 +499,36 @@ def _export(args: argparse.Namespace) -> int:
             metrics = json.loads(Path(args.metrics).read_text())
         except (OSError, ValueError) as exc:
             raise ArgumentError(f"--metrics {args.metrics}: unreadable ({exc})") from exc
-    out = export_bundle(args.coarse_run, args.detail_run, args.data, args.out, name=args.name,
-                        category=args.category, metrics=metrics, description=args.description,
-                        force=args.force, body=_body(args.body_model), mocap_dir=args.mocap,
-                        parity_data=args.parity_data)
+    if _is_garment_run(args.coarse_run):  # train-garment's garment form: its work folder's runs and data.json
+        from .nn.garment_model import export_garment_bundle
+
+        if args.parity_data:
+            raise ArgumentError("--parity-data: a garment model's files are checked on its data config's validation "
+                                "sequences; leave it out")
+        out = export_garment_bundle(args.coarse_run, args.detail_run, args.data, args.out, name=args.name,
+                                    category=args.category, description=args.description, force=args.force,
+                                    mocap_dir=args.mocap, body=_body(args.body_model), metrics=metrics)
+    else:
+        out = export_bundle(args.coarse_run, args.detail_run, args.data, args.out, name=args.name,
+                            category=args.category, metrics=metrics, description=args.description,
+                            force=args.force, body=_body(args.body_model), mocap_dir=args.mocap,
+                            parity_data=args.parity_data)
     checked = f"the sequences of {args.parity_data}" if args.parity_data else "the validation data"
     sys.stdout.write(f"wrote bundle {out} (ONNX checked against torch on {checked})\n")
     return 0
+
+
+def _is_garment_run(run: str) -> bool:
+    """Whether ``run`` is a garment model run (``train-garment --form garment``), by its run.json."""
+    import json
+    from pathlib import Path
+
+    from .nn.garment_model import RUN, RUN_KIND
+
+    try:
+        return json.loads((Path(run) / RUN).read_text()).get("kind") == RUN_KIND
+    except (OSError, ValueError, AttributeError):
+        return False  # export_bundle names what is wrong with the run
 
 
 def _evaluate(args: argparse.Namespace) -> int:

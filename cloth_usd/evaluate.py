@@ -36,7 +36,7 @@ from .datagen.floor import floor_report
 from .errors import ArgumentError
 
 __all__ = ["HIST_BIN_MM", "HIST_MAX_MM", "ErrorStats", "EvaluationReport", "evaluate_bundle",
-           "body_label", "shirt_labels"]
+           "body_label", "shirt_labels", "garment_reads", "learned_garment"]
 
 log = logging.getLogger(__name__)
 
@@ -123,6 +123,45 @@ class EvaluationReport:
     """The content of ``metrics.json``."""
 
 
+def garment_reads(bundle, clips) -> str:
+    """Which rest of a data set's sequences ``bundle`` reads: ``draped`` (the garment the
+    simulation starts from) or ``authored`` (the garment handed to the simulator, before its
+    drape: :attr:`~cloth_usd.nn.data.Clip.authored_points`).
+
+    A category's bundle reads the draped garment, as it always has. A garment's own bundle
+    learned its displacement from one rest garment (:attr:`ModelBundle.garment_rest`): it reads
+    the one of the two that is that garment on its own body (a garment handed over as the
+    draped garment of another data set is the draped one there); without a record, the
+    authored one, which a bake of the authored garment reads.
+    """
+    if bundle.garment is None:
+        return "draped"
+    if bundle.garment_rest is not None:
+        rest, betas = bundle.garment_rest
+        for clip in clips:
+            if clip.rest_points.shape != rest.shape or not (
+                    clip.pair.betas.shape == betas.shape and np.allclose(clip.pair.betas, betas, atol=1e-5)):
+                continue  # another garment, or another body (the garment carried there the same way both ways)
+            if clip.authored_points is not None and np.abs(clip.authored_points - rest).max() < 1e-4:
+                return "authored"
+            if np.abs(clip.rest_points - rest).max() < 1e-4:
+                return "draped"
+    return "authored" if all(c.authored_points is not None for c in clips) else "draped"
+
+
+def learned_garment(bundle, body: BodyModel, clip, reads: str = "draped"):
+    """A test sequence's garment on ``bundle`` (a :class:`~cloth_usd.runtime.garment.LearnedGarment`),
+    reading its draped rest or, with ``reads="authored"`` (:func:`garment_reads`) and a data set
+    that keeps it, the garment before the drape. (A garment's own model read from another rest
+    than the one it learned from would, for instance, drape an already draped garment again.)
+    """
+    from .runtime.garment import LearnedGarment
+
+    if reads == "authored" and clip.authored_points is not None:
+        return LearnedGarment(bundle, body, clip.pair.betas, clip.authored_points, clip.pair.faces)
+    return LearnedGarment(bundle, body, clip.pair.betas, clip.rest_points, clip.pair.faces, binding=clip.pair.binding)
+
+
 def _ablation_label(run) -> str:
     c = run.config
     parts = [p for p, off in (("no decomposition", not c.decompose),
@@ -183,7 +222,6 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
     from .core.files import file_sha256
     from .nn.data import load_dataset
     from .runtime.bundle import load_bundle
-    from .runtime.garment import LearnedGarment
 
     bundle_obj = load_bundle(bundle)
     data = load_dataset(data_dir, splits, body=body, max_frames=max_frames)
@@ -200,6 +238,7 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
             log.warning("%s: %d of %d sequences wear other garments than bundle '%s''s; measuring the %d that wear "
                         "its own", data_dir, len(clips) - len(worn), len(clips), bundle_obj.name, len(worn))
         clips = worn
+    reads = garment_reads(bundle_obj, clips)
     trained_on = bundle_obj.manifest.get("training_data", {}).get("manifest_sha256")
     if trained_on != data.manifest_sha256:
         log.warning("%s: the bundle was trained on another data set (manifest sha256 %s...)", data_dir,
@@ -252,8 +291,7 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
             seqs[key] = seqs.get(key, 0) + 1
             frames[key] = frames.get(key, 0) + clip.num_frames
             stats.setdefault(key, {t: ErrorStats() for t in tiers})
-        learned = LearnedGarment(bundle_obj, body, clip.pair.betas, clip.rest_points, clip.pair.faces,
-                                 binding=clip.pair.binding)
+        learned = learned_garment(bundle_obj, body, clip, reads)
         truth = clip.positions.astype(np.float64)
         outputs = {"skinning": skin_garment(clip.pair.binding, clip.poses, clip.transl, body.parents)}
         for tier in ("coarse", "detail"):
@@ -283,7 +321,8 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         "format": REPORT_FORMAT,
         "bundle": {"path": str(Path(bundle).resolve()), "name": bundle_obj.name, "sha256": bundle_obj.sha256,
                    "files": dict(bundle_obj.manifest["files"]), "coarse_base": bundle_obj.form.base.value,
-                   "heading": bundle_obj.form.heading.value, "coarse_features": bundle_obj.form.features.value},
+                   "heading": bundle_obj.form.heading.value, "coarse_features": bundle_obj.form.features.value,
+                   "reads": reads},
         "data": {"path": str(Path(data_dir).resolve()), "manifest_sha256": data.manifest_sha256,
                  "same_as_training": trained_on == data.manifest_sha256, "max_frames": max_frames},
         "error": "Euclidean distance of each garment vertex to the simulated one, every frame [mm]; "
@@ -321,6 +360,10 @@ def _markdown(metrics: dict) -> str:
         f"{' and the nearest body (contact)' if b.get('coarse_features') == 'contact' else ' (body)'}",
         f"- heading: the models see the body "
         f"{'turned to face +Z (canonical)' if b.get('heading') == 'canonical' else 'as it stands (world)'}",
+        "- the learned tiers read the garment " + ("as authored, before the drape (the rest the garment's own "
+                                                   "bundle was trained on)" if b.get("reads") == "authored" else
+                                                   "draped, as the simulation starts")
+        + "; skinning skins the draped garment",
         f"- error: {metrics['error']}",
         f"- histograms: {metrics['histogram_bin_mm']} mm bins (`histograms.png`, `histograms.npz`)",
     ]

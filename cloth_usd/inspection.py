@@ -3,7 +3,7 @@ and garments that do not look worn by their body."""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from os import PathLike
 from pathlib import Path
@@ -30,11 +30,16 @@ class InspectReport:
     size, far from its bones, :func:`cloth_usd.core.plausibility.scale_notes`; inside its
     shaped body or far from its surface at rest, :func:`cloth_usd.core.plausibility.body_notes`,
     the lines the bake warns with)."""
+    bundles: Mapping[str, str] = field(default_factory=dict)
+    """By garment prim path: the model bundle its coarse and detail tiers would bake with
+    (``NAME (its own)`` for a garment's own bundle, ``NAME`` for its category's, ``none`` when
+    no bundle serves it: skinning only)."""
 
 
 def inspect_stage(path: str | Path, *,
                   joint_map: JointMap | Mapping[str, str] | str | PathLike | None = None,
-                  body_model: str | PathLike | None = None) -> InspectReport:
+                  body_model: str | PathLike | None = None,
+                  models: Sequence[str | PathLike] | None = None) -> InspectReport:
     """Read a stage leniently: every contract violation becomes a problem line.
 
     Args:
@@ -43,6 +48,8 @@ def inspect_stage(path: str | Path, *,
         body_model: the SMPL-format body model a bake would use (a file or folder; None for
             the embedded one): each garment is measured against its character's body shaped by
             its betas, and a body model that cannot serve a character is a problem, as in a bake.
+        models: the bake's ``--models`` folders (None: the shipped bundles), to name the bundle
+            each garment's learned tiers would use; a bundle that does not verify is a problem.
     """
     from .usd.read import open_stage, read_scene
 
@@ -50,7 +57,35 @@ def inspect_stage(path: str | Path, *,
     skipped: list[str] = []
     scene = read_scene(open_stage(path), problems=problems, skipped=skipped, joint_map=joint_map)
     warnings = _scale_warnings(scene) + _body_warnings(scene, body_model, problems)
-    return InspectReport(scene=scene, problems=tuple(problems), skipped=tuple(skipped), warnings=tuple(warnings))
+    bundles = _bundles(scene, models, problems)
+    return InspectReport(scene=scene, problems=tuple(problems), skipped=tuple(skipped), warnings=tuple(warnings),
+                         bundles=bundles)
+
+
+def _bundles(scene: Scene, models: Sequence[str | PathLike] | None, problems: list[str]) -> dict[str, str]:
+    """By garment prim path: the bundle a learned tier would bake it with, as the baker looks
+    it up (:func:`cloth_usd.runtime.bundle.find_bundle`)."""
+    from .errors import BundleError
+    from .runtime.bundle import find_bundle
+
+    found = {}
+    for g in scene.garments:
+        try:
+            bundle = find_bundle(g.category, models, worn=(len(g.rest_points), g.triangles))
+        except BundleError as e:
+            problems.append(f"{g.prim_path}: {e}")
+            continue
+        if bundle is None:
+            found[g.prim_path] = "none"
+        elif bundle.garment is None:
+            found[g.prim_path] = bundle.name
+        elif bundle.garment.serves(len(g.rest_points), g.triangles):
+            found[g.prim_path] = f"{bundle.name} (its own)"
+        else:  # a --models folder that is another garment's own bundle
+            found[g.prim_path] = f"{bundle.name} (another garment's)"
+            problems.append(f"{g.prim_path}: bundle '{bundle.name}' ({bundle.path}) serves another garment "
+                            f"({bundle.garment.vertices} vertices); its learned tiers would refuse this one")
+    return found
 
 
 def _scale_warnings(scene: Scene) -> list[str]:
@@ -142,8 +177,9 @@ def format_report(report: InspectReport) -> str:
     for g in report.scene.garments:
         state = "enabled" if g.enabled else "disabled"
         tier = g.tier.value if g.tier else "default"
+        models = f"  models {report.bundles[g.prim_path]}" if g.prim_path in report.bundles else ""
         lines.append(f"  {g.prim_path}  {g.category.value}  body {g.body_path}  tier {tier}  {state}  "
-                     f"{g.rest_points.shape[0]} vertices, {g.triangles.shape[0]} triangles")
+                     f"{g.rest_points.shape[0]} vertices, {g.triangles.shape[0]} triangles{models}")
     lines.append(f"warnings    {len(report.warnings)}")
     lines.extend(f"  {w}" for w in report.warnings)
     lines.append(f"problems    {len(report.problems)}")

@@ -28,7 +28,7 @@ def main(argv: list[str]) -> int:
     from cloth_usd.core.skinning import skin_garment
     from cloth_usd.nn.data import load_dataset
     from cloth_usd.runtime.bundle import load_bundle
-    from cloth_usd.runtime.garment import LearnedGarment
+    from cloth_usd.evaluate import garment_reads, learned_garment
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("data")
@@ -56,8 +56,7 @@ def main(argv: list[str]) -> int:
     panels = {"skinning": skin_garment(clip.pair.binding, poses, transl, body.parents)[0]}
     for path in bundles:
         bundle = load_bundle(path)
-        learned = LearnedGarment(bundle, body, clip.pair.betas, clip.rest_points, clip.pair.faces,
-                                 binding=clip.pair.binding)
+        learned = learned_garment(bundle, body, clip, garment_reads(bundle, data.clips))
         for tier in args.tiers.split(","):
             label = tier if len(bundles) == 1 else f"{bundle.name} {tier}"
             panels[label] = learned.evaluate(tier, clip.poses[:t + 1], clip.transl[:t + 1]).points[-1]

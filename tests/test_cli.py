@@ -89,6 +89,7 @@ def test_inspect_and_doctor(capsys):
     out = capsys.readouterr().out
     assert "/Character/Skeleton" in out and "/Character/Tshirt" in out and "tshirt" in out
     assert "1001..1096" in out and "problems    0" in out
+    assert "models sample-tshirt-own (its own)" in out  # the bundle its learned tiers bake with
     assert main(["doctor"]) == 0
     out = capsys.readouterr().out
     assert "FAIL" not in out and "body model" in out

@@ -12,6 +12,7 @@ import numpy as np
 
 from ..core.body import BodyModel
 from ..core.frame_range import FrameRange, parse_frames
+from ..core.garment_inputs import faces_sha256
 from ..core.joint_names import as_joint_map
 from ..core.scene import Character, Garment, Scene, Tier
 from ..errors import ArgumentError, BodyModelError, SceneError
@@ -121,14 +122,16 @@ def _resolve_tier(garment: Garment, tier: Tier | None, source: str, *,
                   models: Sequence[str | Path] | None, found: dict) -> TierChoice:
     """The garment's tier and, for a learned tier, the verified bundle of its category.
 
-    ``found`` caches bundles by category across garments.
+    The garment's own bundle (``cloth-usd train-garment``) in the search folders comes before its
+    category's. ``found`` caches bundles by category and garment triangles across garments.
     """
     chosen = garment.tier or tier or Tier.SKINNING
     if chosen is Tier.SKINNING:
         return TierChoice(chosen, None)
-    if garment.category not in found:
-        found[garment.category] = find_bundle(garment.category, models)
-    bundle = found[garment.category]
+    key = (garment.category, len(garment.rest_points), faces_sha256(garment.triangles))
+    if key not in found:
+        found[key] = find_bundle(garment.category, models, worn=(len(garment.rest_points), garment.triangles))
+    bundle = found[key]
     if bundle is None:
         dirs = ", ".join(str(d) for d in (models if models is not None else [default_bundle_dir()]))
         raise ArgumentError(

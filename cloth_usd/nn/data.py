@@ -101,6 +101,11 @@ class Clip:
     """(T, 72) float64 axis-angle [rad]."""
     transl: np.ndarray
     """(T, 3) float64 root translation [m]."""
+    authored_points: np.ndarray | None = None
+    """(N, 3) float64 the garment as it was handed to the simulator, before its drape (the
+    data set's ``drape/`` cache), canonical body frame; :attr:`rest_points` is the draped
+    garment. What a bake of the authored garment reads, and the rest a garment's own model
+    was trained on. None when the folder keeps no drape of this pair."""
 
     @property
     def num_frames(self) -> int:
@@ -183,7 +188,8 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
             raise ArgumentError(str(exc)) from exc
 
     # Shards are read (and unzipped, which frees the GIL) a few at a time; pairs are prepared in order.
-    clips = [_clip(body, fit, pairs, root, name, entry, split, shard, max_frames)
+    authored = _authored(root)
+    clips = [_clip(body, fit, pairs, root, name, entry, split, shard, max_frames, authored)
              for (name, entry, split), shard in zip(chosen, _in_threads(read, chosen))]
     clips = [c for c in clips if c is not None]
     log.info("%s: %d sequences, %d garment-body pairs", root, len(clips), len(pairs))
@@ -191,8 +197,25 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
                    clips=tuple(clips))
 
 
+def _draped_key(draped: np.ndarray) -> str:
+    """A draped garment's key in :func:`_authored` (its float32 points, as the shards keep them)."""
+    return hashlib.sha256(np.ascontiguousarray(draped, dtype=np.float32).tobytes()).hexdigest()
+
+
+def _authored(root: Path) -> dict[str, np.ndarray]:
+    """By :func:`_draped_key` of each draped garment in ``root/drape``: the garment before its drape."""
+    found = {}
+    for path in sorted((root / "drape").glob("*.npz")):
+        try:
+            with np.load(path) as drape:
+                found[_draped_key(drape["vertices"])] = np.asarray(drape["source"], dtype=np.float64)
+        except (OSError, ValueError, KeyError) as exc:
+            log.warning("%s: unreadable drape (%s); its sequences keep no authored garment", path, exc)
+    return found
+
+
 def _clip(body: BodyModel, fit: FitModel, pairs: dict, root: Path, name: str, entry: dict, split: Split,
-          shard: Shard, max_frames: int | None) -> Clip | None:
+          shard: Shard, max_frames: int | None, authored: dict[str, np.ndarray] | None = None) -> Clip | None:
     """One sequence of :func:`load_dataset` (its pair prepared once, in ``pairs``), None when
     nothing is left after its warm-up."""
     rest = shard.garment_vertices.astype(np.float64)
@@ -208,7 +231,8 @@ def _clip(body: BodyModel, fit: FitModel, pairs: dict, root: Path, name: str, en
         return None
     return Clip(name=name, split=split, meta=meta, pair=pairs[key],
                 rest_points=rest, positions=shard.positions[w:t], coarse=shard.coarse[w:t],
-                poses=shard.poses[w:t], transl=shard.transl[w:t])
+                poses=shard.poses[w:t], transl=shard.transl[w:t],
+                authored_points=(authored or {}).get(_draped_key(shard.garment_vertices)))
 
 
 def warmup_frames(meta: dict) -> int:

@@ -20,7 +20,11 @@ zero: an untrained model is the skinned garment.
 Two tiers, as the paper's: the coarse model is trained with the stiffer bending the coarse
 tier is trained with (``bending_scale`` 10); the detail model adds a second displacement
 on top of the frozen coarse one, trained with the material's own bending. The detail
-tier's exported file holds both (one model call a frame).
+tier's exported file holds the detail model alone, and the runtime adds the coarse file's
+displacement to it (the manifest's ``models.detail.adds``), so a bundle holds each network
+once. The files store the weights as float16 (half the size; the runtime computes in
+float32): the rounding moves the garment by hundredths of a millimetre, measured at export
+(``metrics.float16_weights``).
 
 Training needs no simulation: batches of frames of the data set config's planned training
 sequences (the garment carried onto the training bodies), the quasi-static energy of
@@ -53,8 +57,8 @@ from ..core.postprocess import nearest_vertex
 from ..core.scene import Tier
 from ..errors import ArgumentError, ClothUsdError
 
-__all__ = ["GarmentModelConfig", "GarmentNet", "GarmentTiers", "train_garment_model", "load_garment_run",
-           "export_garment_bundle"]
+__all__ = ["GarmentModelConfig", "GarmentNet", "HalfStored", "rounded_to_half", "train_garment_model",
+           "load_garment_run", "export_garment_bundle"]
 
 log = logging.getLogger(__name__)
 
@@ -121,16 +125,33 @@ class GarmentNet(nn.Module):
         return (self.output_scale * self.out(h)).reshape(pose.shape[0], self.num_vertices, 3)
 
 
-class GarmentTiers(nn.Module):
-    """The detail tier as exported: the frozen coarse displacement plus the detail model's."""
+class HalfStored(nn.Module):
+    """A :class:`GarmentNet` whose weights are stored as float16 and computed in float32 (the
+    exported form: half the file; onnxruntime casts the weights once when it loads them)."""
 
-    def __init__(self, coarse: GarmentNet, detail: GarmentNet | None = None) -> None:
+    def __init__(self, net: GarmentNet) -> None:
         super().__init__()
-        self.coarse, self.detail = coarse, detail
+        linears = [m for m in net.body if isinstance(m, nn.Linear)] + [net.out]
+        for i, layer in enumerate(linears):
+            self.register_buffer(f"w{i}", layer.weight.detach().to(torch.float16))
+            self.register_buffer(f"b{i}", layer.bias.detach().to(torch.float16))
+        self.count, self.num_vertices, self.output_scale = len(linears), net.num_vertices, net.output_scale
 
     def forward(self, pose: torch.Tensor, betas: torch.Tensor) -> torch.Tensor:
-        d = self.coarse(pose, betas)
-        return d if self.detail is None else d + self.detail(pose, betas)
+        h = torch.cat([pose, 0.5 * betas], dim=-1)
+        for i in range(self.count):
+            h = nn.functional.linear(h, getattr(self, f"w{i}").float(), getattr(self, f"b{i}").float())
+            h = torch.relu(h) if i < self.count - 1 else h
+        return (self.output_scale * h).reshape(pose.shape[0], self.num_vertices, 3)
+
+
+def rounded_to_half(net: GarmentNet) -> GarmentNet:
+    """A float64 copy of ``net`` with its weights rounded to float16 (what :class:`HalfStored` computes)."""
+    out = copy.deepcopy(net).double()
+    with torch.no_grad():
+        for p in out.parameters():
+            p.copy_(p.to(torch.float16).double())
+    return out
 
 
 @dataclass
@@ -344,25 +365,30 @@ def load_garment_run(run_dir: str | Path) -> tuple[GarmentNet, dict]:
     return net.eval(), info
 
 
-def _export(model: nn.Module, path: Path) -> Path:
-    """``model`` (made float32 in place) as ONNX at ``path``, as :mod:`cloth_usd.nn.export` exports the graph models."""
+def _export(model: HalfStored, path: Path) -> Path:
+    """``model`` as ONNX at ``path``, as :mod:`cloth_usd.nn.export` exports the graph models."""
     from ..runtime.io import GARMENT_INPUTS
     from .export import _export as export_onnx
 
     example = {"pose": torch.zeros(2, POSE_FEATURES), "betas": torch.zeros(2, SHAPE_FEATURES)}
-    return export_onnx(model.float(), GARMENT_INPUTS, Path(path), example)
+    return export_onnx(model, GARMENT_INPUTS, Path(path), example)
 
 
 def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_config: str | Path,
                           out_dir: str | Path, *, name: str, category: str, description: str = "",
                           force: bool = False, mocap_dir: str | Path | None = None, body: BodyModel | None = None,
-                          physics=None, tolerance: float = 1e-5) -> Path:
+                          physics=None, tolerance: float = 1e-5, metrics: dict | None = None) -> Path:
     """Export a garment's coarse (and detail) model as a verified bundle bound to its triangles.
 
-    The ONNX files are checked against the torch models on the validation sequences' frames
-    (largest displacement difference at most ``tolerance`` [m]); the manifest records the
-    garment's vertex count and triangles' sha256, which a bake checks the scene's garment
-    against, and the training poses' and bodies' ranges.
+    Each file holds one model with float16 weights (:class:`HalfStored`); the detail file's
+    displacement is added to the coarse file's (``models.detail.adds``). The ONNX files are
+    checked against the torch models with the same rounded weights on the validation
+    sequences' frames (largest displacement difference at most ``tolerance`` [m]); what the
+    rounding itself moves is measured there too (``metrics.float16_weights``). The manifest
+    records the garment's vertex count and triangles' sha256, which a bake checks the scene's
+    garment against, and the training poses' and bodies' ranges, and ``metrics`` (``cloth-usd
+    evaluate``'s ``metrics.json``) as ``metrics.evaluation``, marked whether it was measured on
+    these very files (re-exporting the same runs writes byte-identical ONNX files).
     """
     import tempfile
 
@@ -370,11 +396,11 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
     from ..core.heading import Heading
     from ..core.limits import betas_range_record, pose_range_record
     from ..core.pipeline import CoarseBase, CoarseFeatures, CoarseForm
-    from ..datagen.factory import load_config, train_betas, train_poses
+    from ..datagen.factory import load_config, load_own_garment, own_garment_files, train_betas, train_poses
     from ..runtime.bundle import GarmentIdentity, load_bundle, write_bundle
     from ..runtime.session import ModelSession
     from ..runtime.io import OUTPUT
-    from .export import OPSET
+    from .export import OPSET, _check_evaluated
     from .physics_train import physics_set
 
     body = body if body is not None else load_body_model()
@@ -388,23 +414,24 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
     data = physics if physics is not None else physics_set(data_config, body, mocap_dir=mocap_dir)
     if c_info["data"]["config_sha256"] != data.config_sha256:
         raise ArgumentError(f"{coarse_run}: trained on another data set config than {data_config}")
-    models = {"coarse": GarmentTiers(coarse)}
-    if detail is not None:
-        models["detail"] = GarmentTiers(coarse, detail)
+    nets = {"coarse": coarse} if detail is None else {"coarse": coarse, "detail": detail}
     val = _prepared(data.split("val"))
     with tempfile.TemporaryDirectory(prefix="cloth-usd-export-") as tmp:
         tmp = Path(tmp)
-        files, worst = {}, {}
-        for tier, model in models.items():
-            files[tier] = _export(model, tmp / f"{tier}.onnx")
+        files, worst, rounding = {}, {}, {}
+        for tier, net in nets.items():
+            files[tier] = _export(HalfStored(net), tmp / f"{tier}.onnx")
             session = ModelSession(files[tier], prefer_gpu=False)
-            reference = copy.deepcopy(model).double()  # the float64 torch model the file is checked against
-            worst[tier] = 0.0
+            reference = rounded_to_half(net)  # the float64 torch model the file is checked against
+            exact = copy.deepcopy(net).double()
+            worst[tier], rounding[tier] = 0.0, 0.0
             for clip in val:
                 pose, betas = clip.pose.astype(np.float32), clip.betas.astype(np.float32)
                 got = session.run({"pose": pose, "betas": betas})[OUTPUT]
                 with torch.no_grad():
-                    want = reference(torch.from_numpy(clip.pose), torch.from_numpy(clip.betas)).numpy()
+                    args = torch.from_numpy(clip.pose), torch.from_numpy(clip.betas)
+                    want = reference(*args).numpy()
+                    rounding[tier] = max(rounding[tier], float(np.abs(want - exact(*args).numpy()).max()))
                 worst[tier] = max(worst[tier], float(np.abs(got - want).max()))
         if not max(worst.values()) <= tolerance:
             raise ClothUsdError(f"export parity failed: ONNX and torch differ by {max(worst.values()) * 1000:.4f} "
@@ -413,23 +440,28 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
         fit = tmp / "fit.npz"
         data.fit.save(fit)
         factory = load_config(data_config, mocap_dir=mocap_dir)
+        own = load_own_garment(own_garment_files(factory)[0])  # the garment as trained: its rest on its own body
         training = {"manifest_sha256": data.config_sha256,
                     "description": description or f"{c_info['data']['train_sequences']} planned sequences of "
                                                   f"{Path(data_config).name}",
                     "poses": pose_range_record(train_poses(factory, body)),
                     "bodies": betas_range_record(train_betas(factory))}
         configs = {"coarse": {"garment_model": c_info["config"], "best_step": c_info["best_step"]}}
-        metrics = {"export_parity": {f"{t}_max_m": v for t, v in worst.items()},
+        metrics_out = {"export_parity": {f"{t}_max_m": v for t, v in worst.items()},
+                   "float16_weights": {f"{t}_max_m": v for t, v in rounding.items()},
                    "validation": {"coarse": {"energy": c_info["best_val_energy"],
                                              "skinned_energy": c_info["val_start_energy"]}}}
+        if metrics:
+            metrics_out["evaluation"] = _check_evaluated(metrics, files["coarse"], files.get("detail"), log)
         if d_info is not None:
             configs["detail"] = {"garment_model": d_info["config"], "best_step": d_info["best_step"]}
-            metrics["validation"]["detail"] = {"energy": d_info["best_val_energy"],
+            metrics_out["validation"]["detail"] = {"energy": d_info["best_val_energy"],
                                                "coarse_energy": d_info["val_start_energy"]}
         out = write_bundle(out_dir, name=name, category=category, coarse_onnx=files["coarse"],
                            detail_onnx=files.get("detail"), fit_npz=fit, configs=configs,
-                           training_data=training, metrics=metrics, opset=OPSET, force=force,
+                           training_data=training, metrics=metrics_out, opset=OPSET, force=force,
                            form=CoarseForm(CoarseBase.SKINNED, Heading.CANONICAL, CoarseFeatures.BODY),
+                           detail_adds_coarse=True, garment_rest=(own.vertices, own.betas),
                            garment=GarmentIdentity(vertices=int(c_info["num_vertices"]),
                                                    faces_sha256=c_info["faces_sha256"]))
     load_bundle(out)

@@ -74,6 +74,7 @@ class GarmentIdentity:
         return {"vertices": int(self.vertices), "faces_sha256": str(self.faces_sha256)}
 _FILES = {Tier.COARSE: "coarse.onnx", Tier.DETAIL: "detail.onnx"}
 _FIT = "fit.npz"
+_REST = "rest.npz"
 
 
 def default_bundle_dir() -> Path:
@@ -115,6 +116,13 @@ class ModelBundle:
     garment: GarmentIdentity | None = None
     """The one garment a garment's own bundle serves (its models take the pose and the shape,
     :data:`~cloth_usd.runtime.io.GARMENT_INPUTS`); None: a category's bundle (any topology)."""
+    detail_adds_coarse: bool = False
+    """True when the detail file's output is added to the coarse file's (the manifest's
+    ``models.detail.adds`` is ``coarse``; a garment's own bundle); False: it is the whole."""
+    garment_rest: tuple[np.ndarray, np.ndarray] | None = None
+    """A garment's own bundle: ``(rest points (N, 3) [m], canonical body frame, betas (10,))``, the
+    garment on its own body as it was trained (the manifest's ``garment.rest`` file); None when
+    the bundle records none (a category's bundle, or one exported before it was recorded)."""
     _sessions: dict = field(default_factory=dict, repr=False)
 
     def model_path(self, tier: Tier) -> Path:
@@ -228,6 +236,10 @@ def load_bundle(path: str | Path) -> ModelBundle:
     if features not in {f.value for f in CoarseFeatures}:
         raise BundleError(f"{mpath}: models.coarse.features {features!r} is not one of "
                           f"{', '.join(f.value for f in CoarseFeatures)} (a newer bundle? update cloth-usd)")
+    adds = models.get(Tier.DETAIL.value, {}).get("adds") if Tier.DETAIL in tiers else None
+    if adds not in (None, "coarse") or (adds is not None and "garment" not in manifest):
+        raise BundleError(f"{mpath}: models.detail.adds {adds!r} is not understood (a garment's own bundle may "
+                          "say 'coarse'; a newer bundle? update cloth-usd)")
     garment = None
     if "garment" in manifest:
         entry = manifest["garment"]
@@ -235,6 +247,8 @@ def load_bundle(path: str | Path) -> ModelBundle:
                 and isinstance(entry.get("faces_sha256"), str)):
             raise BundleError(f"{mpath}: manifest field 'garment' must be {{vertices: int > 0, faces_sha256: str}}")
         garment = GarmentIdentity(entry["vertices"], entry["faces_sha256"])
+        if entry.get("rest") is not None and entry["rest"] not in files:
+            raise BundleError(f"{mpath}: garment.rest must name a file listed in 'files'")
     try:
         records = _training_records(manifest.get("training_data"))
     except ValueError as exc:
@@ -257,10 +271,22 @@ def load_bundle(path: str | Path) -> ModelBundle:
         fit = FitModel.load(folder / fit_file)
     except (OSError, ValueError) as exc:
         raise BundleError(f"{folder}: bundle file {fit_file} is not a fit model ({exc})") from exc
+    rest = None
+    if garment is not None and manifest["garment"].get("rest") is not None:
+        rest_file = manifest["garment"]["rest"]
+        try:
+            with np.load(folder / rest_file, allow_pickle=False) as z:
+                rest = (np.asarray(z["vertices"], dtype=np.float64), np.asarray(z["betas"], dtype=np.float64))
+        except (OSError, KeyError, ValueError) as exc:
+            raise BundleError(f"{folder}: bundle file {rest_file} is not a garment rest ({exc})") from exc
+        if rest[0].shape != (garment.vertices, 3):
+            raise BundleError(f"{folder}: bundle file {rest_file} holds {rest[0].shape} points, the garment has "
+                              f"{garment.vertices}")
     return ModelBundle(path=folder, name=name, category=category, tiers=tiers,
                        sha256=hashlib.sha256(raw).hexdigest(), manifest=manifest, fit=fit,
                        form=CoarseForm(base, heading, features), pose_limits=records.get("poses"),
-                       betas_limits=records.get("bodies"), garment=garment)
+                       betas_limits=records.get("bodies"), garment=garment, detail_adds_coarse=adds == "coarse",
+                       garment_rest=rest)
 
 
 #: In a folder of bundles: ``{"<category>": "<bundle folder>"}``, the bundle tried first for a
@@ -268,10 +294,17 @@ def load_bundle(path: str | Path) -> ModelBundle:
 DEFAULTS = "defaults.json"
 
 
-def _candidates(folder: Path, category: Category) -> list[Path]:
+def _candidates(folder: Path, category: Category, worn: tuple[int, np.ndarray] | None = None) -> list[Path]:
+    """The bundle folders to try, in order: ``folder`` itself when it is a bundle; else the
+    garment's own bundles that serve ``worn`` ((vertex count, (M, 3) triangles); in name
+    order), then the category's bundles (the :data:`DEFAULTS` one first, then name order), a
+    garment's own bundle among them only when it serves ``worn``."""
     if (folder / MANIFEST).is_file():
         return [folder]
     found = sorted(p for p in folder.iterdir() if (p / MANIFEST).is_file())
+    identities = {p: _identity_of(p) for p in found}
+    serving = [p for p in found if identities[p] is not None and worn is not None and identities[p].serves(*worn)]
+    found = [p for p in found if identities[p] is None]
     defaults = folder / DEFAULTS
     if defaults.is_file():
         try:
@@ -280,11 +313,22 @@ def _candidates(folder: Path, category: Category) -> list[Path]:
             raise BundleError(f"{defaults}: unreadable ({exc}); expected {{\"<category>\": \"<bundle folder>\"}}") from exc
         if chosen is not None:
             first = folder / str(chosen)
-            if first not in found:
+            if first not in identities:
                 raise BundleError(f"{defaults}: the default {category.value} bundle {chosen!r} is not a bundle folder "
                                   f"in {folder}")
-            found = [first] + [p for p in found if p != first]
-    return found
+            if first in found:
+                found = [first] + [p for p in found if p != first]
+    return serving + found
+
+
+def _identity_of(bundle: Path) -> GarmentIdentity | None:
+    """The garment a garment's own bundle serves, from its manifest; None for a category's
+    bundle or a manifest that is not readable (:func:`_category_of` names that one)."""
+    try:
+        entry = json.loads((bundle / MANIFEST).read_bytes()).get("garment")
+        return GarmentIdentity(int(entry["vertices"]), str(entry["faces_sha256"])) if entry is not None else None
+    except (OSError, ValueError, AttributeError, KeyError, TypeError):
+        return None
 
 
 def _category_of(bundle: Path) -> str | None:
@@ -298,16 +342,19 @@ def _category_of(bundle: Path) -> str | None:
     return manifest.get("category") if isinstance(manifest, dict) else None
 
 
-def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | None = None
-                ) -> ModelBundle | None:
+def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | None = None, *,
+                worn: tuple[int, np.ndarray] | None = None) -> ModelBundle | None:
     """The first bundle for ``category`` in the search folders, verified; None if there is none.
 
     Args:
         category: garment category.
         search_dirs: folders that are bundles or hold bundle folders (``--models DIR``);
-            None for :func:`default_bundle_dir`. In a folder, the bundle its
-            :data:`DEFAULTS` file names for the category is tried first, then the others in
-            name order.
+            None for :func:`default_bundle_dir`. In a folder, a garment's own bundle that
+            serves ``worn`` is tried first, then the bundle its :data:`DEFAULTS` file names
+            for the category, then the others in name order (a garment's own bundle only
+            for the garment it serves). A folder that is a bundle is that bundle.
+        worn: (vertex count, (M, 3) triangles) of the garment to bake; None: the
+            category's bundles alone.
     Raises:
         ArgumentError: a given search folder does not exist.
         BundleError: the matching bundle fails verification, or none matches and a
@@ -322,7 +369,7 @@ def find_bundle(category: Category | str, search_dirs: Iterable[str | Path] | No
             if given:
                 raise ArgumentError(f"--models {d}: no such folder")
             continue
-        for candidate in _candidates(d, category):
+        for candidate in _candidates(d, category, worn):
             try:
                 found = _category_of(candidate)
             except BundleError as exc:  # it may be another category's: an error only if none is found
@@ -341,7 +388,8 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
                  detail_onnx: str | Path | None, fit_npz: str | Path, configs: Mapping[str, Any],
                  training_data: Mapping[str, Any], metrics: Mapping[str, Any], opset: int,
                  force: bool = False, form: CoarseForm = CoarseForm(),
-                 garment: GarmentIdentity | None = None) -> Path:
+                 garment: GarmentIdentity | None = None, detail_adds_coarse: bool = False,
+                 garment_rest: tuple[np.ndarray, np.ndarray] | None = None) -> Path:
     """Copy exported models and the fit model into a new bundle folder and write its manifest.
 
     Args:
@@ -360,6 +408,10 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
             ``models.coarse``.
         garment: the one garment a garment's own models serve (their inputs are then
             :data:`~cloth_usd.runtime.io.GARMENT_INPUTS`); None: a category's models.
+        detail_adds_coarse: the detail file's output is added to the coarse file's (a
+            garment's own bundle only; ``models.detail.adds``).
+        garment_rest: a garment's own bundle: (rest points (N, 3), betas (10,)), the garment on
+            its own body as trained, written as ``rest.npz`` (``garment.rest``).
     Returns:
         The bundle folder.
     """
@@ -377,6 +429,10 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
             raise ArgumentError(f"{src}: {tier.value} model file not found")
     if not Path(fit_npz).is_file():
         raise ArgumentError(f"{fit_npz}: fit model file not found")
+    if garment_rest is not None and garment is None:
+        raise ArgumentError("garment_rest: only a garment's own bundle records its rest garment")
+    if detail_adds_coarse and (garment is None or detail_onnx is None):
+        raise ArgumentError("detail_adds_coarse: only a garment's own bundle with a detail model adds its coarse one")
     try:
         _training_records(training_data)
     except ValueError as exc:
@@ -397,6 +453,8 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
         if tier is Tier.COARSE:
             models[tier.value].update(base=form.base.value, heading=form.heading.value,
                                       features=form.features.value)
+        elif detail_adds_coarse:
+            models[tier.value]["adds"] = Tier.COARSE.value
         tiers.append(tier.value)
     shutil.copyfile(fit_npz, out / _FIT)
     files[_FIT] = file_sha256(out / _FIT)
@@ -414,5 +472,10 @@ def write_bundle(out_dir: str | Path, *, name: str, category: Category | str, co
     }
     if garment is not None:
         manifest["garment"] = garment.to_json()
+    if garment_rest is not None:
+        np.savez(out / _REST, vertices=np.asarray(garment_rest[0], dtype=np.float64),
+                 betas=np.asarray(garment_rest[1], dtype=np.float64))
+        files[_REST] = file_sha256(out / _REST)
+        manifest["garment"]["rest"] = _REST
     (out / MANIFEST).write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
     return out

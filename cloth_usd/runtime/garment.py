@@ -125,10 +125,13 @@ class LearnedGarment:
             from ..core.pipeline import run_garment_model
             from ..core.garment_inputs import garment_displacement_inputs
 
-            session = self.bundle.session(tier)
+            sessions = [self.bundle.session(tier)]
+            if tier is Tier.DETAIL and self.bundle.detail_adds_coarse:
+                sessions.append(self.bundle.session(Tier.COARSE))
 
             def run_model(canonical_poses: np.ndarray) -> np.ndarray:
-                return session.run(garment_displacement_inputs(canonical_poses, self.betas))[OUTPUT]
+                inputs = garment_displacement_inputs(canonical_poses, self.betas)
+                return sum(s.run(inputs)[OUTPUT] for s in sessions)
 
             points, moved = run_garment_model(self.body, self.pair, poses, transl, run_model, batch_size=batch_size,
                                               margin=self.margin, postprocess=postprocess)

@@ -79,7 +79,9 @@ def test_an_untrained_model_is_the_skinned_garment_and_training_lowers_its_energ
 
 
 def test_export_writes_a_bundle_bound_to_the_garment_that_animates_it(own, tmp_path):
-    from cloth_usd.nn.garment_model import export_garment_bundle
+    from cloth_usd.core.garment_inputs import garment_displacement_inputs
+    from cloth_usd.core.heading import heading_frame
+    from cloth_usd.nn.garment_model import export_garment_bundle, load_garment_run, rounded_to_half
     from cloth_usd.runtime.bundle import load_bundle
     from cloth_usd.runtime.garment import LearnedGarment
     from cloth_usd.datagen import walk_cycle
@@ -98,10 +100,46 @@ def test_export_writes_a_bundle_bound_to_the_garment_that_animates_it(own, tmp_p
     coarse = garment.evaluate("coarse", poses, transl, postprocess=False).points
     detail = garment.evaluate("detail", poses, transl, postprocess=False).points
     assert 1e-4 < np.abs(coarse - skinned).max() < 0.15 and np.abs(detail - coarse).max() > 1e-6
+    # each file holds one model, its weights stored as float16; the detail tier adds the coarse file's displacement
+    assert bundle.manifest["models"]["detail"]["adds"] == "coarse" and bundle.detail_adds_coarse
+    assert max(bundle.manifest["metrics"]["float16_weights"].values()) < 1e-4
+    import onnx
+
+    for tier in ("coarse", "detail"):
+        weights = onnx.load(str(bundle.path / bundle.manifest["models"][tier]["file"])).graph.initializer
+        biggest = max(weights, key=lambda w: int(np.prod(w.dims)))
+        assert biggest.data_type == onnx.TensorProto.FLOAT16 and list(biggest.dims) == [3 * len(verts), 32]
+    canonical = heading_frame(poses, transl, garment.pair.joints[0]).canonical_poses(poses)
+    inputs = garment_displacement_inputs(canonical, garment.betas)
+    nets = [rounded_to_half(load_garment_run(root / tier)[0]) for tier in ("coarse", "detail")]
+    with torch.no_grad():
+        args = torch.from_numpy(inputs["pose"]).double(), torch.from_numpy(inputs["betas"]).double()
+        d = (nets[0](*args) + nets[1](*args)).numpy()
+    np.testing.assert_allclose(detail, skin_displaced(garment.binding, poses, transl, body.parents, d), atol=1e-5)
     # another garment's triangles are refused in one line naming the bundle
     with pytest.raises(BundleError, match="mine") as err:  # the same points, one triangle fewer
         LearnedGarment(bundle, body, betas, verts, faces[1:])
     assert "\n" not in str(err.value) and "train-garment" in str(err.value)
+
+
+def test_cloth_usd_export_re_exports_garment_runs_with_their_evaluation(own, tmp_path, capsys):
+    """``cloth-usd export`` of a train-garment work folder's runs: byte-identical files, and
+    evaluation metrics measured on them are recorded as the same models."""
+    from cloth_usd.cli import main
+
+    root = own[0]
+    args = ["export", "--coarse-run", str(root / "coarse"), "--detail-run", str(root / "detail"),
+            "--data", str(root / "data.json"), "--name", "mine"]
+    assert main([*args, "-o", str(tmp_path / "a")]) == 0
+    first = json.loads((tmp_path / "a" / "manifest.json").read_text())
+    (tmp_path / "m.json").write_text(json.dumps({"bundle": {"files": first["files"]}, "rows": []}))
+    assert main([*args, "-o", str(tmp_path / "b"), "--metrics", str(tmp_path / "m.json")]) == 0
+    second = json.loads((tmp_path / "b" / "manifest.json").read_text())
+    assert second["files"] == first["files"] and second["metrics"]["evaluation"]["same_models"] is True
+    assert second["garment"] == first["garment"] and second["models"]["detail"]["adds"] == "coarse"
+    capsys.readouterr()
+    assert main([*args, "-o", str(tmp_path / "c"), "--parity-data", str(tmp_path)]) == 2
+    assert "--parity-data" in capsys.readouterr().err
 
 
 def test_a_detail_run_needs_its_coarse_run_and_one_garment(own, tmp_path):
@@ -137,7 +175,7 @@ def test_evaluate_measures_the_sequences_that_wear_the_bundles_garment(tmp_path_
     from cloth_usd.core.heading import Heading
     from cloth_usd.evaluate import evaluate_bundle
     from cloth_usd.nn.data import load_dataset
-    from cloth_usd.nn.garment_model import GarmentNet, GarmentTiers, _export
+    from cloth_usd.nn.garment_model import GarmentNet, HalfStored, _export
     from cloth_usd.runtime.bundle import GarmentIdentity, write_bundle
 
     spec = importlib.util.spec_from_file_location("train_data", Path(__file__).parent / "train_data.py")
@@ -156,7 +194,7 @@ def test_evaluate_measures_the_sequences_that_wear_the_bundles_garment(tmp_path_
 
     def bundle(identity, name):
         model = tmp_path / f"{name}.onnx"
-        _export(GarmentTiers(GarmentNet(identity.vertices, hidden=8, layers=1)), model)
+        _export(HalfStored(GarmentNet(identity.vertices, hidden=8, layers=1)), model)
         (tmp_path / "fit.npz").write_bytes((data / "fit.npz").read_bytes())
         return write_bundle(tmp_path / name, name=name, category="tshirt", coarse_onnx=model, detail_onnx=None,
                             fit_npz=tmp_path / "fit.npz", configs={}, training_data={}, metrics={}, opset=18,
@@ -171,6 +209,56 @@ def test_evaluate_measures_the_sequences_that_wear_the_bundles_garment(tmp_path_
     with pytest.raises(ArgumentError, match="no sequence wears") as err:
         evaluate_bundle(data, bundle(GarmentIdentity(n + 1, sha), "other"), tmp_path / "report2", max_frames=3)
     assert "\n" not in str(err.value)
+
+
+def test_a_garments_own_bundle_reads_the_test_sequences_garment_as_authored(tmp_path_factory, tmp_path):
+    """A data set keeps each garment as it was handed to the simulator, before the drape (its
+    drape cache's ``source``): a garment's own bundle reads that one, as a bake of the authored
+    garment does, and a category's bundle the draped garment the simulation starts from."""
+    import importlib.util
+    import shutil
+    import sys
+    from pathlib import Path
+
+    from cloth_usd.evaluate import garment_reads, learned_garment
+    from cloth_usd.nn.data import load_dataset
+    from cloth_usd.runtime.bundle import GarmentIdentity, load_bundle, write_bundle
+
+    spec = importlib.util.spec_from_file_location("train_data", Path(__file__).parent / "train_data.py")
+    helpers = sys.modules.get("train_data")
+    if helpers is None:
+        helpers = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(helpers)
+        sys.modules["train_data"] = helpers
+    data = tmp_path / "data"
+    shutil.copytree(helpers.tiny_dataset(tmp_path_factory), data)
+    clip = load_dataset(data, None).clips[0]
+    assert clip.authored_points is None  # no drape cache: nothing to read
+    authored = clip.rest_points + [0.0, 0.01, 0.0]  # the drape let it down by 1 cm
+    (data / "drape").mkdir(exist_ok=True)
+    np.savez(data / "drape" / "pair.npz", vertices=clip.rest_points, faces=clip.pair.faces, source=authored)
+    clips = load_dataset(data, None).clips
+    same = [c for c in clips if np.array_equal(c.rest_points, clip.rest_points)]
+    assert same and all(np.array_equal(c.authored_points, authored) for c in same)
+    assert all(c.authored_points is None for c in clips if c not in same)
+    (data / "c.onnx").write_bytes(b"-")
+    own = write_bundle(tmp_path / "own", name="own", category="tshirt", coarse_onnx=data / "c.onnx", detail_onnx=None,
+                       fit_npz=data / "fit.npz", configs={}, training_data={}, metrics={}, opset=18,
+                       garment=GarmentIdentity(len(authored), faces_sha256(clip.pair.faces)))
+    body = load_body_model()
+    own = load_bundle(own)
+    # no record of its rest: the garment as authored, which a bake reads, where every sequence keeps it
+    assert garment_reads(own, same) == "authored" and garment_reads(own, clips) == "draped"
+    np.testing.assert_allclose(learned_garment(own, body, same[0], "authored").binding.rest_points, authored)
+    for trained_on, reads in ((authored, "authored"), (clip.rest_points, "draped")):  # recorded: the one it learned
+        recorded = write_bundle(tmp_path / reads, name=reads, category="tshirt", coarse_onnx=data / "c.onnx",
+                                detail_onnx=None, fit_npz=data / "fit.npz", configs={}, training_data={}, metrics={},
+                                opset=18, garment=own.garment, garment_rest=(trained_on, clip.pair.betas))
+        assert garment_reads(load_bundle(recorded), clips) == reads
+    graph = write_bundle(tmp_path / "graph", name="graph", category="tshirt", coarse_onnx=data / "c.onnx",
+                         detail_onnx=None, fit_npz=data / "fit.npz", configs={}, training_data={}, metrics={}, opset=18)
+    assert garment_reads(load_bundle(graph), clips) == "draped"
+    assert learned_garment(load_bundle(graph), body, same[0]).binding is same[0].pair.binding
 
 
 def test_a_broken_run_is_one_line_naming_it(own, tmp_path):

@@ -145,6 +145,26 @@ def test_train_garment_of_the_garment_form_bakes_the_sample(tmp_path, capsys):
     err = capsys.readouterr().err.strip()
     assert "walk_tshirt_zup_cm" in err and "3516" in err and len(err.splitlines()) == 1
     assert not (tmp_path / "d.usdc").exists()
+    # in a folder of bundles the sample's own bundle comes before the category's default, for the sample's shirt
+    # alone: the Z-up sample's shirt bakes with the default from the same folder
+    import shutil
+
+    from cloth_usd.runtime.bundle import default_bundle_dir
+
+    folder = tmp_path / "bundles"
+    shutil.copytree(out, folder / "own")
+    shutil.copytree(default_bundle_dir() / "tshirt-v6", folder / "tshirt-v6")
+    (folder / "defaults.json").write_text('{"tshirt": "tshirt-v6"}')
+    for scene, name in ((SAMPLE, "own"), (other, "tshirt-v6")):
+        assert main(["bake", str(scene), "-o", str(tmp_path / f"{name}.usdc"), "--tier", "coarse", "--models",
+                     str(folder), "--frames", "1001:1002", "--no-progress"]) == 0
+        assert f"bundle {name}" in capsys.readouterr().out
+    # inspect names the bundle the learned tiers would use, and says the other shirt's is not its own
+    assert main(["inspect", str(SAMPLE), "--models", str(out)]) == 0
+    assert "models own (its own)" in capsys.readouterr().out
+    assert main(["inspect", str(other), "--models", str(out)]) == 1
+    said = capsys.readouterr().out
+    assert "models own (another garment's)" in said and "serves another garment (3516 vertices)" in said
 
 
 def test_several_garments_each_worn_by_every_body_and_by_their_own(tmp_path):

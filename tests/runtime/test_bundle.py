@@ -90,6 +90,38 @@ def test_a_folders_defaults_file_picks_the_bundle_tried_first(tmp_path, fake_exp
         find_bundle("tshirt", [models])
 
 
+def test_a_garments_own_bundle_comes_first_for_its_garment_alone(tmp_path, fake_exported):
+    """In a folder of bundles, the bundle trained for this garment (train-garment) wins over the
+    category's default; another garment passes it by; a folder that is the bundle is the bundle."""
+    from cloth_usd.core.garment_inputs import faces_sha256
+    from cloth_usd.runtime.bundle import GarmentIdentity, write_bundle
+
+    coarse, det, fit, configs = fake_exported
+    faces = np.array([[0, 1, 2], [0, 2, 3]])
+    models = tmp_path / "models"
+    write_tiny_bundle(models / "tshirt-v9", fake_exported, name="category")
+    (models / "defaults.json").write_text('{"tshirt": "tshirt-v9"}')
+    own = write_bundle(models / "a-own", name="own", category="tshirt", coarse_onnx=coarse, detail_onnx=det,
+                       fit_npz=fit, configs=configs, training_data={}, metrics={}, opset=18,
+                       garment=GarmentIdentity(4, faces_sha256(faces)), detail_adds_coarse=True)
+    assert load_bundle(own).detail_adds_coarse
+    assert find_bundle("tshirt", [models], worn=(4, faces)).name == "own"
+    assert find_bundle("tshirt", [models], worn=(4, faces[::-1])).name == "category"  # other triangles
+    assert find_bundle("tshirt", [models]).name == "category"
+    assert find_bundle("dress", [models], worn=(4, faces)) is None  # its category only
+    (models / "defaults.json").unlink()  # name order: the own bundle ("a-own") is passed by all the same
+    assert find_bundle("tshirt", [models], worn=(5, faces)).name == "category"
+    assert find_bundle("tshirt", [own], worn=(5, faces)).name == "own"  # named: the bake refuses it, in one line
+    with pytest.raises(ArgumentError, match="only a garment's own bundle"):
+        write_bundle(tmp_path / "x", name="x", category="tshirt", coarse_onnx=coarse, detail_onnx=det, fit_npz=fit,
+                     configs={}, training_data={}, metrics={}, opset=18, detail_adds_coarse=True)
+    m = json.loads((own / "manifest.json").read_text())
+    m["models"]["detail"]["adds"] = "skinning"
+    (own / "manifest.json").write_text(json.dumps(m))
+    with pytest.raises(BundleError, match="models.detail.adds 'skinning'"):
+        load_bundle(own)
+
+
 def test_tampered_file_names_the_file(tmp_path, fake_exported):
     folder = write_tiny_bundle(tmp_path / "b", fake_exported)
     data = bytearray((folder / "coarse.onnx").read_bytes())
@@ -181,6 +213,36 @@ def test_the_shipped_tshirt_bundle_verifies_and_records_its_evaluation():
     assert bundle.form.heading.value == "canonical"
     evaluation = json.loads((bundle.path / "manifest.json").read_text())["metrics"]["evaluation"]
     assert evaluation["same_models"] is True and evaluation["rows"]  # measured on these very ONNX files
+    for row in evaluation["rows"]:  # against Newton on real motion: both learned tiers below skinning
+        mean = row["mean_mm"]
+        assert max(mean["coarse"], mean["detail"]) < mean["skinning"], row["title"]
+    clips = [r for r in evaluation["held_out_clips"] if r["bundle"] == bundle.name]
+    assert len({r["clip"] for r in clips}) >= 5 and {r["tier"] for r in clips} == {"coarse", "detail"}
+    for row in clips:
+        assert row["fallback_coarse"] == row["fallback_skinning"] == 0, (row["clip"], row["tier"])
+
+
+def test_the_sample_shirt_bakes_with_its_own_shipped_bundle():
+    """The sample's T-shirt has a bundle of its own (train-garment's garment form) that comes before
+    the category's default; the Z-up sample's other shirt gets the default. The bundle records the
+    rest garment it was trained on (the sample's, as authored) and travels with its evaluation
+    against Newton and on the held-out real clips, measured on its own files."""
+    from cloth_usd.core.body import load_body_model, shape_body
+    from cloth_usd.core.frames import worn_rest_points
+    from cloth_usd.usd.read import open_stage, read_scene
+
+    root = Path(__file__).resolve().parents[2] / "samples"
+    scene = read_scene(open_stage(root / "walk_tshirt" / "scene.usda"))
+    shirt, char = scene.garments[0], scene.characters[0]
+    bundle = find_bundle("tshirt", worn=(len(shirt.rest_points), shirt.triangles))
+    assert bundle.name == "sample-tshirt-own" and bundle.garment.serves(len(shirt.rest_points), shirt.triangles)
+    assert bundle.detail_adds_coarse and bundle.tiers == (Tier.COARSE, Tier.DETAIL)
+    rest = worn_rest_points(char, shirt.rest_points, shape_body(load_body_model(), char.betas)[1])
+    np.testing.assert_allclose(bundle.garment_rest[0], rest, atol=1e-6)
+    other = read_scene(open_stage(root / "walk_tshirt_zup_cm" / "scene.usda")).garments[0]
+    assert find_bundle("tshirt", worn=(len(other.rest_points), other.triangles)).name == "tshirt-v6"
+    evaluation = bundle.manifest["metrics"]["evaluation"]
+    assert evaluation["same_models"] is True and evaluation["rows"] and evaluation["bundle"]["reads"] == "authored"
     for row in evaluation["rows"]:  # against Newton on real motion: both learned tiers below skinning
         mean = row["mean_mm"]
         assert max(mean["coarse"], mean["detail"]) < mean["skinning"], row["title"]
