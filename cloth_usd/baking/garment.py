@@ -75,6 +75,31 @@ def range_notes(char: Character, motion: CanonicalMotion, times: np.ndarray,
     return notes
 
 
+#: A garment's rest points farther than this [m] from the rest its own bundle was trained on are
+#: warned about (the same triangles, moved or reshaped: the model reads them as its own).
+REST_TOLERANCE = 0.005
+
+
+def _rest_notes(bundle: ModelBundle | None, rest: np.ndarray, betas: np.ndarray) -> list[str]:
+    """A note when a garment's own bundle is handed its garment in another rest shape than the
+    one it was trained on, on the same body (on another body the garment is carried there and
+    sits elsewhere by design)."""
+    if bundle is None or bundle.garment_rest is None:
+        return []
+    trained, trained_betas = bundle.garment_rest
+    n = min(len(betas), len(trained_betas))
+    same_body = (np.allclose(betas[:n], trained_betas[:n], atol=1e-5) and not np.any(betas[n:])
+                 and not np.any(trained_betas[n:]))
+    if trained.shape != rest.shape or not same_body:
+        return []
+    off = float(np.linalg.norm(rest - trained, axis=1).max())
+    if off <= REST_TOLERANCE:
+        return []
+    return [f"its rest points lie up to {off * 1000:.0f} mm from the garment bundle '{bundle.name}' was trained on "
+            f"(the same triangles, moved or reshaped); the learned tiers read it as that garment (a bundle of "
+            f"its own: cloth-usd train-garment)"]
+
+
 def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, motion: CanonicalMotion,
                  times: np.ndarray, tier: Tier, to_prim: np.ndarray, *, chunk: int, progress: bool,
                  bundle: ModelBundle | None = None, batch_size: int | None = None,
@@ -118,6 +143,7 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
                         f"+-{FIT_LIMIT:g} on a factor, beyond the garments bundle '{bundle.name}' was trained on; the "
                         f"{tier.value} tier reads it clamped to +-{FIT_LIMIT:g} (a bundle of its own: "
                         f"cloth-usd train-garment)")
+    warnings += [f"{where}: {note}" for note in _rest_notes(bundle, rest, char.betas)] if learned is not None else []
     for w in warnings:
         log.warning("%s", w)
     poses, transl = motion.poses, motion.transl

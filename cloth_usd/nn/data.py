@@ -104,8 +104,9 @@ class Clip:
     authored_points: np.ndarray | None = None
     """(N, 3) float64 the garment as it was handed to the simulator, before its drape (the
     data set's ``drape/`` cache), canonical body frame; :attr:`rest_points` is the draped
-    garment. What a bake of the authored garment reads, and the rest a garment's own model
-    was trained on. None when the folder keeps no drape of this pair."""
+    garment. What a bake of the authored garment reads (a garment's own bundle reads the one
+    of the two it was trained on: :func:`cloth_usd.evaluate.garment_reads`). None when the
+    folder keeps no drape of this pair."""
 
     @property
     def num_frames(self) -> int:
