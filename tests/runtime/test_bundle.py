@@ -120,6 +120,21 @@ def test_a_garments_own_bundle_comes_first_for_its_garment_alone(tmp_path, fake_
     (own / "manifest.json").write_text(json.dumps(m))
     with pytest.raises(BundleError, match="models.detail.adds 'skinning'"):
         load_bundle(own)
+    # the rest garment it was trained on travels with it, checked
+    rest = np.arange(12.0).reshape(4, 3)
+    kept = write_bundle(models / "b-own", name="kept", category="tshirt", coarse_onnx=coarse, detail_onnx=det,
+                        fit_npz=fit, configs=configs, training_data={}, metrics={}, opset=18,
+                        garment=GarmentIdentity(4, faces_sha256(faces)), garment_rest=(rest, np.ones(10)))
+    got = load_bundle(kept).garment_rest
+    np.testing.assert_array_equal(got[0], rest)
+    np.testing.assert_array_equal(got[1], np.ones(10))
+    np.savez(kept / "rest.npz", vertices=rest[:3], betas=np.ones(10))
+    _replace_file(kept, "rest.npz", (kept / "rest.npz").read_bytes())
+    with pytest.raises(BundleError, match="rest.npz holds"):
+        load_bundle(kept)
+    with pytest.raises(ArgumentError, match="garment_rest"):
+        write_bundle(tmp_path / "y", name="y", category="tshirt", coarse_onnx=coarse, detail_onnx=det, fit_npz=fit,
+                     configs={}, training_data={}, metrics={}, opset=18, garment_rest=(rest, np.ones(10)))
 
 
 def test_tampered_file_names_the_file(tmp_path, fake_exported):
