@@ -212,6 +212,10 @@ def _parser() -> argparse.ArgumentParser:
                     help="training runs evaluated with torch (detail runs on the bundle's coarse model)")
     ev.add_argument("-o", "--out", required=True, help="report folder: report.md, metrics.json, PNGs")
     ev.add_argument("--max-frames", type=int, help="only the first frames of every sequence")
+    ev.add_argument("--rest", choices=("trained", "authored", "draped"), default="trained",
+                    help="the rest garment the tiers read: trained (default: the learned tiers the one the bundle "
+                         "was trained on, skinning the draped one), authored (every tier the garment before the "
+                         "drape, as a bake of the authored garment reads it), draped (every tier the draped one)")
     ev.add_argument("--device", default="cpu", help="torch device of the ablation runs: cpu (default), cuda, auto")
     ev.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
 
@@ -535,7 +539,8 @@ def _evaluate(args: argparse.Namespace) -> int:
     from .evaluate import evaluate_bundle
 
     report = evaluate_bundle(args.data, args.bundle, args.out, ablation_runs=args.ablation_runs,
-                             body=_body(args.body_model), max_frames=args.max_frames, device=args.device)
+                             body=_body(args.body_model), max_frames=args.max_frames, device=args.device,
+                             rest=args.rest)
     for row in report.rows:
         cells = ", ".join(f"{t} {row['mean_mm'][t]:.2f}" for t in report.tiers)
         sys.stdout.write(f"{row['title']}: {cells} mm\n")

@@ -202,7 +202,8 @@ def _session_coarse_fn(session):
 def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Path, *,
                     ablation_runs: Sequence[str | Path] = (), body: BodyModel | None = None,
                     max_frames: int | None = None, batch_size: int = 16, device: str = "cpu",
-                    splits: Sequence[str] = ("test_body", "test_garment", "test_motion")) -> EvaluationReport:
+                    splits: Sequence[str] = ("test_body", "test_garment", "test_motion"),
+                    rest: str = "trained") -> EvaluationReport:
     """Evaluate a bundle (and ablation runs) on the test splits; write the report folder.
 
     Args:
@@ -216,6 +217,11 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         batch_size: frames per model call.
         device: torch device of the ablation runs (``cpu``, ``cuda``, ``auto``).
         splits: the test splits to evaluate.
+        rest: the rest garment the tiers read. ``trained``: the learned tiers the one the
+            bundle was trained on (:func:`garment_reads`), skinning the draped one the
+            simulation starts from; ``authored``: every tier the garment as it was handed to
+            the simulator, before its drape, as a bake of the authored garment reads it (needs
+            a data set that keeps its drapes); ``draped``: every tier the draped one.
     Raises:
         ArgumentError: no test sequences, or a bad folder.
     """
@@ -238,7 +244,16 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
             log.warning("%s: %d of %d sequences wear other garments than bundle '%s''s; measuring the %d that wear "
                         "its own", data_dir, len(clips) - len(worn), len(clips), bundle_obj.name, len(worn))
         clips = worn
-    reads = garment_reads(bundle_obj, clips)
+    if rest not in ("trained", "authored", "draped"):
+        raise ArgumentError(f"--rest {rest!r}: expected trained, authored or draped")
+    if rest == "authored":
+        if ablation_runs:
+            raise ArgumentError("--rest authored: the ablation runs read the draped garment; leave one of them out")
+        missing = [c.name for c in clips if c.authored_points is None]
+        if missing:
+            raise ArgumentError(f"--rest authored: --data {data_dir} keeps no drape of {len(missing)} sequences "
+                                f"({missing[0]}, ...): it has no garment from before the drape to read")
+    reads = garment_reads(bundle_obj, clips) if rest == "trained" else rest
     trained_on = bundle_obj.manifest.get("training_data", {}).get("manifest_sha256")
     if trained_on != data.manifest_sha256:
         log.warning("%s: the bundle was trained on another data set (manifest sha256 %s...)", data_dir,
@@ -293,7 +308,8 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
             stats.setdefault(key, {t: ErrorStats() for t in tiers})
         learned = learned_garment(bundle_obj, body, clip, reads)
         truth = clip.positions.astype(np.float64)
-        outputs = {"skinning": skin_garment(clip.pair.binding, clip.poses, clip.transl, body.parents)}
+        skin = learned.binding if rest == "authored" else clip.pair.binding
+        outputs = {"skinning": skin_garment(skin, clip.poses, clip.transl, body.parents)}
         for tier in ("coarse", "detail"):
             if tier in tiers:
                 outputs[tier] = learned.evaluate(tier, clip.poses, clip.transl, batch_size=batch_size).points
@@ -322,7 +338,7 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         "bundle": {"path": str(Path(bundle).resolve()), "name": bundle_obj.name, "sha256": bundle_obj.sha256,
                    "files": dict(bundle_obj.manifest["files"]), "coarse_base": bundle_obj.form.base.value,
                    "heading": bundle_obj.form.heading.value, "coarse_features": bundle_obj.form.features.value,
-                   "reads": reads},
+                   "reads": reads, "skinning_reads": "authored" if rest == "authored" else "draped"},
         "data": {"path": str(Path(data_dir).resolve()), "manifest_sha256": data.manifest_sha256,
                  "same_as_training": trained_on == data.manifest_sha256, "max_frames": max_frames},
         "error": "Euclidean distance of each garment vertex to the simulated one, every frame [mm]; "
@@ -360,10 +376,9 @@ def _markdown(metrics: dict) -> str:
         f"{' and the nearest body (contact)' if b.get('coarse_features') == 'contact' else ' (body)'}",
         f"- heading: the models see the body "
         f"{'turned to face +Z (canonical)' if b.get('heading') == 'canonical' else 'as it stands (world)'}",
-        "- the learned tiers read the garment " + ("as authored, before the drape (the rest the garment's own "
-                                                   "bundle was trained on)" if b.get("reads") == "authored" else
-                                                   "draped, as the simulation starts")
-        + "; skinning skins the draped garment",
+        "- the learned tiers read the garment " + ("as authored, before the drape" if b.get("reads") == "authored"
+                                                   else "draped, as the simulation starts")
+        + "; skinning skins the " + ("authored" if b.get("skinning_reads") == "authored" else "draped") + " garment",
         f"- error: {metrics['error']}",
         f"- histograms: {metrics['histogram_bin_mm']} mm bins (`histograms.png`, `histograms.npz`)",
     ]

@@ -259,6 +259,15 @@ def test_a_garments_own_bundle_reads_the_test_sequences_garment_as_authored(tmp_
                          detail_onnx=None, fit_npz=data / "fit.npz", configs={}, training_data={}, metrics={}, opset=18)
     assert garment_reads(load_bundle(graph), clips) == "draped"
     assert learned_garment(load_bundle(graph), body, same[0]).binding is same[0].pair.binding
+    # evaluate --rest authored hands every tier the garment before the drape: a data set that keeps
+    # none of some sequences is one line naming it
+    from cloth_usd.evaluate import evaluate_bundle
+
+    with pytest.raises(ArgumentError, match="keeps no drape of") as err:
+        evaluate_bundle(data, graph, tmp_path / "report", rest="authored")
+    assert "\n" not in str(err.value)
+    with pytest.raises(ArgumentError, match="--rest 'folded'"):
+        evaluate_bundle(data, graph, tmp_path / "report", rest="folded")
 
 
 def test_a_broken_run_is_one_line_naming_it(own, tmp_path):
