@@ -129,23 +129,21 @@ def garment_reads(bundle, clips) -> str:
     drape: :attr:`~cloth_usd.nn.data.Clip.authored_points`).
 
     A category's bundle reads the draped garment, as it always has. A garment's own bundle
-    learned its displacement from one rest garment (:attr:`ModelBundle.garment_rest`): it reads
+    learned its displacement from one rest garment (:meth:`ModelBundle.trained_rest`): it reads
     the one of the two that is that garment on its own body (a garment handed over as the
     draped garment of another data set is the draped one there); without a record, the
     authored one, which a bake of the authored garment reads.
     """
     if bundle.garment is None:
         return "draped"
-    if bundle.garment_rest is not None:
-        rest, betas = bundle.garment_rest
-        for clip in clips:
-            if clip.rest_points.shape != rest.shape or not (
-                    clip.pair.betas.shape == betas.shape and np.allclose(clip.pair.betas, betas, atol=1e-5)):
-                continue  # another garment, or another body (the garment carried there the same way both ways)
-            if clip.authored_points is not None and np.abs(clip.authored_points - rest).max() < 1e-4:
-                return "authored"
-            if np.abs(clip.rest_points - rest).max() < 1e-4:
-                return "draped"
+    for clip in clips:
+        rest = bundle.trained_rest(clip.pair.betas)
+        if rest is None or clip.rest_points.shape != rest.shape:
+            continue  # another body (the garment carried there the same way both ways), or no record
+        if clip.authored_points is not None and np.abs(clip.authored_points - rest).max() < 1e-4:
+            return "authored"
+        if np.abs(clip.rest_points - rest).max() < 1e-4:
+            return "draped"
     return "authored" if all(c.authored_points is not None for c in clips) else "draped"
 
 

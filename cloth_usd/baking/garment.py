@@ -84,13 +84,8 @@ def _rest_notes(bundle: ModelBundle | None, rest: np.ndarray, betas: np.ndarray)
     """A note when a garment's own bundle is handed its garment in another rest shape than the
     one it was trained on, on the same body (on another body the garment is carried there and
     sits elsewhere by design)."""
-    if bundle is None or bundle.garment_rest is None:
-        return []
-    trained, trained_betas = bundle.garment_rest
-    n = min(len(betas), len(trained_betas))
-    same_body = (np.allclose(betas[:n], trained_betas[:n], atol=1e-5) and not np.any(betas[n:])
-                 and not np.any(trained_betas[n:]))
-    if trained.shape != rest.shape or not same_body:
+    trained = None if bundle is None else bundle.trained_rest(betas)
+    if trained is None or trained.shape != rest.shape:
         return []
     off = float(np.linalg.norm(rest - trained, axis=1).max())
     if off <= REST_TOLERANCE:

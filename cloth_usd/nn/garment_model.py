@@ -448,15 +448,15 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
                     "bodies": betas_range_record(train_betas(factory))}
         configs = {"coarse": {"garment_model": c_info["config"], "best_step": c_info["best_step"]}}
         metrics_out = {"export_parity": {f"{t}_max_m": v for t, v in worst.items()},
-                   "float16_weights": {f"{t}_max_m": v for t, v in rounding.items()},
-                   "validation": {"coarse": {"energy": c_info["best_val_energy"],
-                                             "skinned_energy": c_info["val_start_energy"]}}}
+                       "float16_weights": {f"{t}_max_m": v for t, v in rounding.items()},
+                       "validation": {"coarse": {"energy": c_info["best_val_energy"],
+                                                 "skinned_energy": c_info["val_start_energy"]}}}
         if metrics:
             metrics_out["evaluation"] = _check_evaluated(metrics, files["coarse"], files.get("detail"), log)
         if d_info is not None:
             configs["detail"] = {"garment_model": d_info["config"], "best_step": d_info["best_step"]}
             metrics_out["validation"]["detail"] = {"energy": d_info["best_val_energy"],
-                                               "coarse_energy": d_info["val_start_energy"]}
+                                                   "coarse_energy": d_info["val_start_energy"]}
         out = write_bundle(out_dir, name=name, category=category, coarse_onnx=files["coarse"],
                            detail_onnx=files.get("detail"), fit_npz=fit, configs=configs,
                            training_data=training, metrics=metrics_out, opset=OPSET, force=force,

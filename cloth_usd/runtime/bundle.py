@@ -125,6 +125,18 @@ class ModelBundle:
     the bundle records none (a category's bundle, or one exported before it was recorded)."""
     _sessions: dict = field(default_factory=dict, repr=False)
 
+    def trained_rest(self, betas: np.ndarray) -> np.ndarray | None:
+        """(N, 3) the rest garment this garment's own bundle was trained on, when ``betas`` is
+        the body it was trained on (equal to 1e-5, a missing coefficient zero); None for another
+        body, or when the bundle records no rest (:attr:`garment_rest`)."""
+        if self.garment_rest is None:
+            return None
+        rest, trained = self.garment_rest
+        betas = np.asarray(betas, dtype=np.float64).ravel()
+        n = max(len(betas), len(trained))
+        same = np.allclose(np.pad(betas, (0, n - len(betas))), np.pad(trained, (0, n - len(trained))), atol=1e-5)
+        return rest if same else None
+
     def model_path(self, tier: Tier) -> Path:
         """The ONNX file of ``tier``."""
         return self.path / self.manifest["models"][tier.value]["file"]

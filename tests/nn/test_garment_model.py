@@ -17,6 +17,8 @@ from cloth_usd.errors import ArgumentError, BundleError
 
 torch = pytest.importorskip("torch", reason="training needs torch (pip install 'cloth-usd[train]')")
 
+from train_data import tiny_dataset  # noqa: E402 (the session's tiny data set, built on first use)
+
 
 @pytest.fixture(scope="module")
 def own(tmp_path_factory):
@@ -167,10 +169,6 @@ def test_train_garment_refuses_several_garments_for_the_garment_form(tmp_path, c
 def test_evaluate_measures_the_sequences_that_wear_the_bundles_garment(tmp_path_factory, tmp_path, caplog):
     """A test set of several garments: a garment's own bundle is measured on its garment's
     sequences alone, and a test set without that garment is one line naming it."""
-    import importlib.util
-    import sys
-    from pathlib import Path
-
     from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures, CoarseForm
     from cloth_usd.core.heading import Heading
     from cloth_usd.evaluate import evaluate_bundle
@@ -178,13 +176,7 @@ def test_evaluate_measures_the_sequences_that_wear_the_bundles_garment(tmp_path_
     from cloth_usd.nn.garment_model import GarmentNet, HalfStored, _export
     from cloth_usd.runtime.bundle import GarmentIdentity, write_bundle
 
-    spec = importlib.util.spec_from_file_location("train_data", Path(__file__).parent / "train_data.py")
-    helpers = sys.modules.get("train_data")
-    if helpers is None:
-        helpers = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(helpers)
-        sys.modules["train_data"] = helpers
-    data = helpers.tiny_dataset(tmp_path_factory)
+    data = tiny_dataset(tmp_path_factory)
     clips = load_dataset(data, None).clips
     garments = {faces_sha256(c.pair.faces): c for c in clips}
     assert len(garments) > 1  # the tiny set wears several shirts
@@ -215,23 +207,14 @@ def test_a_garments_own_bundle_reads_the_test_sequences_garment_as_authored(tmp_
     """A data set keeps each garment as it was handed to the simulator, before the drape (its
     drape cache's ``source``): a garment's own bundle reads that one, as a bake of the authored
     garment does, and a category's bundle the draped garment the simulation starts from."""
-    import importlib.util
     import shutil
-    import sys
-    from pathlib import Path
 
     from cloth_usd.evaluate import garment_reads, learned_garment
     from cloth_usd.nn.data import load_dataset
     from cloth_usd.runtime.bundle import GarmentIdentity, load_bundle, write_bundle
 
-    spec = importlib.util.spec_from_file_location("train_data", Path(__file__).parent / "train_data.py")
-    helpers = sys.modules.get("train_data")
-    if helpers is None:
-        helpers = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(helpers)
-        sys.modules["train_data"] = helpers
     data = tmp_path / "data"
-    shutil.copytree(helpers.tiny_dataset(tmp_path_factory), data)
+    shutil.copytree(tiny_dataset(tmp_path_factory), data)
     clip = load_dataset(data, None).clips[0]
     assert clip.authored_points is None  # no drape cache: nothing to read
     authored = clip.rest_points + [0.0, 0.01, 0.0]  # the drape let it down by 1 cm
