@@ -172,6 +172,12 @@ def _parser() -> argparse.ArgumentParser:
                     help="garment (the default for one garment): models of this garment alone (pose and shape to a "
                          "displacement of its vertices), the closest to cloth; paper (the default for several): the "
                          "paper's graph models (any topology; one bundle for several garments of a category)")
+    tg.add_argument("--sim-data", metavar="DIR",
+                    help="garment form: Newton's frames of some training sequences (cloth-usd datagen "
+                         "WORK/hybrid.json -o DIR, after a first train-garment wrote the work folder): their batches "
+                         "add the spring toward them (the hybrid objective)")
+    tg.add_argument("--sim-weight", type=float, default=1.0e7,
+                    help="garment form, with --sim-data: the spring toward Newton's frames [1/s^2] (default 1e7)")
     tg.add_argument("--steps", type=int, default=3000,
                     help="garment form: coarse model steps of 8 frames (default 3000)")
     tg.add_argument("--detail-steps", type=int, default=1500,
@@ -558,11 +564,12 @@ def _train_garment(args: argparse.Namespace) -> int:
     from .core.frames import worn_rest_points
     from .datagen.factory import OwnGarment
     from .errors import ArgumentError
-    from .nn.own_garment import TEST_SET_CONFIG, OwnGarmentPlan, train_own_garment
+    from .nn.own_garment import HYBRID_CONFIG, TEST_SET_CONFIG, OwnGarmentPlan, train_own_garment
     from .usd.read import open_stage, read_scene
 
     plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches,
-                          form=args.form, steps=args.steps, detail_steps=args.detail_steps)
+                          form=args.form, steps=args.steps, detail_steps=args.detail_steps,
+                          sim_weight=args.sim_weight)
 
     def motion_list(flag: str, path: str | None) -> tuple:
         if not path:
@@ -613,7 +620,8 @@ def _train_garment(args: argparse.Namespace) -> int:
     mocap = f" --mocap {args.mocap or 'MOCAP'}" if any("bvh" in m for m in test_motions) else ""  # the test set's clips
     out = Path(args.out)
     result = train_own_garment(owns, out, name=args.name or out.name, work_dir=args.work, motions=motions,
-                               test_motions=test_motions, mocap_dir=args.mocap, plan=plan, force=args.force,
+                               test_motions=test_motions, mocap_dir=args.mocap, sim_data=args.sim_data, plan=plan,
+                               force=args.force,
                                device=args.device, body=body, progress=show)
     t = result.seconds
     what = f"{prims[0]} ({owns[0].vertices.shape[0]} vertices)" if len(owns) == 1 else \
@@ -625,6 +633,11 @@ def _train_garment(args: argparse.Namespace) -> int:
                      f"a Newton test set for it: cloth-usd datagen {result.work_dir / TEST_SET_CONFIG} -o TESTSET"
                      f"{mocap}, then cloth-usd evaluate --data TESTSET "
                      f"--bundle {result.bundle}\n")
+    if not args.sim_data and (result.work_dir / HYBRID_CONFIG).exists():  # the garment form, trained on its energy
+        mocap = f" --mocap {args.mocap}" if args.mocap else ""
+        sys.stdout.write(f"Newton's frames to train on too (the hybrid objective): cloth-usd datagen "
+                         f"{result.work_dir / HYBRID_CONFIG} -o SIMDATA{mocap}, then this command again with "
+                         "--sim-data SIMDATA --force\n")
     return 0
 
 

@@ -40,7 +40,7 @@ from .fit import FIT_LIMIT, FitModel, pair_distances
 from .garment_inputs import skin_displaced
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
-from .postprocess import DEFAULT_MARGIN, push_out_of_surface, search_tree
+from .postprocess import DEFAULT_MARGIN, StrainLimiter, push_out_of_surface, search_tree
 from .scene import Category
 from .skinning import SkinBinding, bind_worn, skin_garment
 from .smpl import JOINT_NAMES
@@ -365,7 +365,7 @@ GarmentFn = Callable[[np.ndarray], np.ndarray]
 
 def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray,
                       model: GarmentFn, *, batch_size: int = 16, margin: float = DEFAULT_MARGIN,
-                      postprocess: bool = True) -> tuple[np.ndarray, np.ndarray]:
+                      postprocess: bool = True, limiter: StrainLimiter | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Animate a garment with its own model: the model reads the pose with the heading taken
     out (so a turned character gets the same garment turned), its displacement of the unposed
     garment is skinned with the world pose, then the post-process (as :func:`run_tiers`).
@@ -376,6 +376,8 @@ def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, tra
         batch_size: frames per model call.
         margin: the post-process clearance [m].
         postprocess: False leaves the model's garment as it made it.
+        limiter: the post-process's first step, which shortens the edges stretched past its
+            limit (:class:`~cloth_usd.core.postprocess.StrainLimiter`); None: none.
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``.
     """
@@ -391,6 +393,7 @@ def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, tra
                                 f"({hi - lo}, {n}, 3)")
         m = skin_displaced(pair.binding, poses[lo:hi], transl[lo:hi], body.parents, d)
         if postprocess:
+            m = limiter(m) if limiter is not None else m
             posed = pose_body(body, pair, poses[lo:hi], transl[lo:hi])
             points[lo:hi], moved[lo:hi] = push_out_of_surface(m, posed.patch_points, posed.patch_normals,
                                                               pair.patch.faces, pair.patch.contact, margin=margin,
@@ -403,7 +406,8 @@ def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, tra
 def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray,
               coarse: CoarseFn, detail: DetailFn | None = None, *, batch_size: int = 16,
               margin: float = DEFAULT_MARGIN, form: CoarseForm = CoarseForm(),
-              skinned: np.ndarray | None = None, postprocess: bool = True) -> tuple[np.ndarray, np.ndarray]:
+              skinned: np.ndarray | None = None, postprocess: bool = True,
+              limiter: StrainLimiter | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Animate a garment with a coarse model and, if given, a detail model.
 
     ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
@@ -425,6 +429,8 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
             one, instead of skinning every frame again. Unused with a body base.
         postprocess: False leaves the models' garment as they made it (what the post-process
             starts from: how far into the body they put it); ``moved`` is then all zero.
+        limiter: the post-process's first step, which shortens the edges stretched past its
+            limit (:class:`~cloth_usd.core.postprocess.StrainLimiter`); None: none.
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the garment per frame and
         how many vertices the post-process moved in each.
@@ -456,6 +462,7 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
             feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])
             m = m + detail(feats, attrs, pair.graph)
         if postprocess:
+            m = limiter(m) if limiter is not None else m
             points[lo:hi], moved[lo:hi] = push_out_of_surface(m, posed.patch_points, posed.patch_normals,
                                                               pair.patch.faces, pair.patch.contact, margin=margin,
                                                               rings=pair.patch.rings, trees=trees)

@@ -23,9 +23,9 @@ import numpy as np
 from ..errors import ArgumentError
 from .association import closest_point_on_triangles, incident_faces
 
-__all__ = ["push_out", "push_out_of_surface", "nearest_vertex", "nearest_body_points", "search_tree", "garment_margin",
-           "DEFAULT_MARGIN", "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_ROUNDS",
-           "PLANE_REACH"]
+__all__ = ["push_out", "push_out_of_surface", "StrainLimiter", "mesh_edges", "STRAIN_LIMIT", "STRAIN_ITERATIONS",
+           "STRAIN_ANCHOR", "nearest_vertex", "nearest_body_points", "search_tree", "garment_margin", "DEFAULT_MARGIN",
+           "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_ROUNDS", "PLANE_REACH"]
 
 #: Default clearance from the body surface [m] (2 mm).
 DEFAULT_MARGIN = 0.002
@@ -254,6 +254,92 @@ def _closest_surface(q: np.ndarray, offset: np.ndarray, near: np.ndarray, found:
     normal = np.einsum("ik,ikc->ic", bary[pick], normals[corners[pick]])
     length = np.linalg.norm(normal, axis=1, keepdims=True)
     return closest[pick], np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
+
+
+#: The longest an edge may be after the post-process, over its rest length: Newton's shirts
+#: keep 99% of their edges within 1.09 of rest on real clips (their longest at 1.25), where a
+#: learned garment stretches its armpits and shoulders as skinning does (1.2-1.4).
+STRAIN_LIMIT = 1.10
+#: Rounds of :class:`StrainLimiter` (each a local step over the edges and one sparse solve).
+STRAIN_ITERATIONS = 4
+#: How strongly :class:`StrainLimiter` holds each vertex where the models put it, against an
+#: edge's pull (1: as strongly as one edge).
+STRAIN_ANCHOR = 1.0e-3
+
+
+def mesh_edges(faces: np.ndarray) -> np.ndarray:
+    """(E, 2) int64 the undirected edges of triangles ``faces`` (M, 3), each once."""
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    return np.unique(np.sort(e, axis=1), axis=0)
+
+
+class StrainLimiter:
+    """Shorten a garment's edges stretched past ``limit`` times their rest length, the garment
+    as a whole (strain limiting as a projective-dynamics solve, Bouaziz et al. 2014).
+
+    Each round, every edge gets a target: its own vector, shortened to ``limit`` times its rest
+    length where it is longer (an edge may fold or bunch, not stretch); then the points that
+    meet all targets best, held to where the models put them with weight ``anchor``, are
+    solved for at once: ``(D^T D + anchor I) x = D^T targets + anchor x0``, ``D`` the edge
+    difference matrix, factored once per garment. One edge at a time (Provot's projection,
+    Jacobi or Gauss-Seidel) takes tens of rounds to shorten a stretched armpit; the solve moves
+    the whole region in three or four. Computed in float32, frames side by side.
+    """
+
+    def __init__(self, rest_points: np.ndarray, faces: np.ndarray, *, limit: float = STRAIN_LIMIT,
+                 iterations: int = STRAIN_ITERATIONS, anchor: float = STRAIN_ANCHOR) -> None:
+        """
+        Args:
+            rest_points: (N, 3) the rest garment [m]; faces: (M, 3) int its triangles.
+            limit: the longest an edge may be over its rest length (> 1).
+            iterations: rounds (>= 1).
+            anchor: the weight holding each vertex to the models' point (> 0).
+        """
+        from scipy import sparse
+        from scipy.sparse.linalg import splu
+
+        rest = np.asarray(rest_points, dtype=np.float64)
+        if not (isinstance(limit, (int, float)) and limit > 1):
+            raise ArgumentError(f"the strain limit must be a number > 1, got {limit!r}")
+        if not (isinstance(iterations, int) and iterations >= 1) or not anchor > 0:
+            raise ArgumentError(f"the strain limiter needs iterations >= 1 and anchor > 0, got {iterations!r}, "
+                                f"{anchor!r}")
+        self.limit, self.iterations, self.anchor = float(limit), int(iterations), float(anchor)
+        self.edges = mesh_edges(faces)
+        self.num_vertices = n = rest.shape[0]
+        m = len(self.edges)
+        rows = np.r_[np.arange(m), np.arange(m)]
+        self._d = sparse.csr_matrix((np.r_[-np.ones(m), np.ones(m)], (rows, self.edges.T.ravel())), shape=(m, n),
+                                    dtype=np.float32)
+        self._dt = self._d.T.tocsr()
+        self.rest_lengths = np.linalg.norm(rest[self.edges[:, 1]] - rest[self.edges[:, 0]], axis=1)
+        self._longest = (self.limit * self.rest_lengths).astype(np.float32)[:, None]
+        system = (self._dt @ self._d + self.anchor * sparse.identity(n, dtype=np.float32, format="csr")).tocsc()
+        self._solve = splu(system.astype(np.float32)).solve if m else None
+
+    def __call__(self, points: np.ndarray) -> np.ndarray:
+        """(T, N, 3) float64 ``points`` (T, N, 3) [m] limited (a new array; a frame with a
+        non-finite point is left as it is, for the guard)."""
+        p = np.array(points, dtype=np.float64)
+        if p.ndim != 3 or p.shape[1:] != (self.num_vertices, 3):
+            raise ArgumentError(f"the strain limiter expected points (T, {self.num_vertices}, 3), got {p.shape}")
+        live = np.flatnonzero(np.isfinite(p).all(axis=(1, 2)))
+        if self._solve is None or not live.size:
+            return p
+        n, frames, m = self.num_vertices, live.size, len(self.edges)
+        origin = p[live].mean(axis=1, keepdims=True)  # float32 about each frame's centre, not the world origin
+        x0 = np.ascontiguousarray((p[live] - origin).transpose(1, 0, 2), dtype=np.float32).reshape(n, -1)
+        x = x0
+        for _ in range(self.iterations):
+            d = (self._d @ x).reshape(m, frames, 3)
+            length = np.linalg.norm(d, axis=2)
+            if not (length > self._longest).any():
+                break
+            d *= (np.minimum(length, self._longest) / np.maximum(length, 1e-12))[..., None]
+            x = self._solve(self._dt @ d.reshape(m, -1) + self.anchor * x0)
+        p[live] = x.reshape(n, frames, 3).transpose(1, 0, 2).astype(np.float64) + origin
+        return p
 
 
 def garment_margin(rest_points: np.ndarray, faces: np.ndarray, *, base: float = DEFAULT_MARGIN,

@@ -90,13 +90,22 @@ class GarmentModelConfig:
     val_every: int = 250
     """Steps between validations; the best validation energy's weights are kept."""
     seed: int = 0
+    supervised_weight: float = 1.0e6
+    """The hybrid objective (training sequences with Newton's frames): the spring toward them,
+    ``supervised_weight / 2 * sum_n m_n |x_n - y_n|^2`` [1/s^2], added to the energy of their
+    batches (``cloth-usd train``'s hybrid weight: at 1e6 a vertex 10 micrometres off is pulled as
+    hard as gravity pulls it)."""
+    supervised_share: float = 0.5
+    """The hybrid objective: the share of the batches drawn from the simulated sequences."""
 
     def __post_init__(self) -> None:
         for name in ("hidden", "layers", "steps", "batch", "val_every"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise ArgumentError(f"garment model {name} must be an integer >= 1, got {value!r}")
-        for name in ("lr", "lr_final", "bending_scale", "contact_margin", "output_scale"):
+        if not (isinstance(self.supervised_share, (int, float)) and 0 <= self.supervised_share <= 1):
+            raise ArgumentError(f"garment model supervised_share must be within 0..1, got {self.supervised_share!r}")
+        for name in ("lr", "lr_final", "bending_scale", "contact_margin", "output_scale", "supervised_weight"):
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ArgumentError(f"garment model {name} must be a number > 0, got {value!r}")
@@ -227,8 +236,14 @@ def _validate(net, fixed, clips: Sequence[_Clip], body, material, frames: int = 
 def train_garment_model(data_config: str | Path, run_dir: str | Path, config: GarmentModelConfig, *,
                         tier: Tier | str = Tier.COARSE, coarse_run: str | Path | None = None,
                         mocap_dir: str | Path | None = None, body: BodyModel | None = None,
-                        physics=None, progress: Callable[[dict], None] | None = None) -> dict:
+                        physics=None, sim_data: str | Path | None = None,
+                        progress: Callable[[dict], None] | None = None) -> dict:
     """Train one tier's garment model on a data set config's planned sequences of one garment.
+
+    With Newton's frames of some training sequences (``sim_data``, or ``physics`` planned with
+    them) the objective is hybrid: ``config.supervised_share`` of the batches come from those
+    sequences and add the spring toward Newton's garment to the energy
+    (``config.supervised_weight``); the others train on the energy alone.
 
     Args:
         data_config: a ``cloth-usd datagen`` config whose sequences all wear one garment
@@ -238,7 +253,10 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
         tier: coarse, or detail (on top of ``coarse_run``'s frozen model).
         coarse_run: the coarse run (detail only).
         physics: the config's :class:`~cloth_usd.nn.physics_train.PhysicsSet` when the caller
-            planned it already (the same config, canonical heading).
+            planned it already (the same config, canonical heading; with ``sim_data``'s targets
+            for a hybrid run).
+        sim_data: a ``cloth-usd datagen`` folder simulated from ``data_config`` (some of its
+            training sequences): the hybrid objective. Ignored when ``physics`` is given.
         progress: called with each validation's row.
     Returns:
         The run's record (what ``run.json`` holds).
@@ -259,7 +277,7 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
     began = time.perf_counter()
-    data = physics if physics is not None else physics_set(data_config, body, mocap_dir=mocap_dir)
+    data = physics if physics is not None else physics_set(data_config, body, mocap_dir=mocap_dir, sim_data=sim_data)
     material = dataclasses.replace(data.material, contact_margin=config.contact_margin,
                                    bend_stiffness=data.material.bend_stiffness * config.bending_scale)
     train, val = _prepared(data.split("train")), _prepared(data.split("val"))
@@ -285,23 +303,34 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
     decay = (config.lr_final / config.lr) ** (1.0 / max(config.steps, 1))
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, decay)
     examples = [(k, t) for k, c in enumerate(train) for t in range(_first(c.source), c.source.num_frames)]
+    simulated = [(k, t) for k, t in examples if train[k].source.target is not None]
+    share = config.supervised_share if simulated else 0.0
     run = Path(run_dir)
     run.mkdir(parents=True, exist_ok=True)
     rows: list[dict] = []
     val_e, start_e, val_mm = _validate(net, fixed, val, body, material)
     best = (val_e, 0, {k: v.clone() for k, v in net.state_dict().items()}, val_mm)
     rows.append({"step": 0, "seconds": round(time.perf_counter() - began, 1), "train_energy": float("nan"),
-                 "val_energy": val_e, "val_start_energy": start_e, "val_mm": val_mm})
+                 "val_energy": val_e, "val_start_energy": start_e, "val_mm": val_mm, "train_sim_mm": float("nan")})
     if progress is not None:
         progress(rows[0])
     acc: list[float] = []
+    sim_mm: list[float] = []
     for step in range(1, config.steps + 1):
-        k, _ = examples[int(rng.integers(len(examples)))]  # a batch shares one clip (one body)
+        supervised = share > 0 and rng.random() < share
+        pool = simulated if supervised else examples
+        k, _ = pool[int(rng.integers(len(pool)))]  # a batch shares one clip (one body)
         clip = train[k]
         lo = _first(clip.source)
         frames = np.sort(rng.integers(lo, clip.source.num_frames, config.batch))
         x = _garment(net, clip, frames, body, fixed)
         loss = _energy(clip.source, x, frames, body, material)["total"].mean()
+        if supervised:
+            from .physics_train import _spring
+
+            target = torch.from_numpy(clip.source.target[frames])
+            loss = loss + _spring(clip.source, x, target, config.supervised_weight).mean()
+            sim_mm.append(1000 * float((x.detach() - target.to(x)).norm(dim=-1).mean()))
         if not torch.isfinite(loss):
             raise ClothUsdError(f"{run}: the energy became {float(loss)} at step {step}; lower lr "
                                 f"({config.lr}) and train again")
@@ -315,10 +344,12 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
             val_e, start_e, val_mm = _validate(net, fixed, val, body, material)
             row = {"step": step, "seconds": round(time.perf_counter() - began, 1),
                    "train_energy": float(np.mean(acc)), "val_energy": val_e, "val_start_energy": start_e,
-                   "val_mm": val_mm}
+                   "val_mm": val_mm, "train_sim_mm": float(np.mean(sim_mm)) if sim_mm else float("nan")}
             rows.append(row)
-            acc = []
-            if val_e < best[0]:
+            acc, sim_mm = [], []
+            if val_e < best[0] or (share > 0 and step == config.steps):
+                # a hybrid run keeps its last weights: Newton's garment is not a minimum of this
+                # energy, so moving toward it can raise the validation energy
                 best = (val_e, step, {k: v.clone() for k, v in net.state_dict().items()}, val_mm)
             log.info("%s step %d: energy %.2f J a frame (start %.2f), %.2f mm from it", tier.value, step, val_e,
                      start_e, val_mm)
@@ -335,6 +366,10 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
             "val_start_energy": rows[0]["val_start_energy"], "seconds": round(time.perf_counter() - began, 1),
             "data": {"path": str(Path(data_config).resolve()), "config_sha256": data.config_sha256,
                      "train_sequences": len(train), "val_sequences": len(val)},
+            "hybrid": None if not simulated else {
+                "simulated_sequences": len({k for k, _ in simulated}), "simulated_frames": len(simulated),
+                "supervised_weight": config.supervised_weight, "supervised_weight_unit": "1/s^2",
+                "supervised_share": config.supervised_share},
             "coarse_run": record_coarse}
     (run / RUN).write_text(json.dumps(info, indent=1) + "\n")
     return info

@@ -37,8 +37,8 @@ from ..errors import ArgumentError
 if TYPE_CHECKING:
     from ..datagen.factory import OwnGarment
 
-__all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "TEST_SET_CONFIG", "TRAIN_BODIES",
-           "train_own_garment"]
+__all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "TEST_SET_CONFIG", "HYBRID_CONFIG",
+           "TRAIN_BODIES", "train_own_garment"]
 
 log = logging.getLogger(__name__)
 
@@ -61,6 +61,12 @@ DATA_CONFIG = "data.json"
 #: training config plans (91 sequences for one garment trained with the ten clips of
 #: ``configs/own_garment_motions.json``; this one plans 7 for one garment and three test motions).
 TEST_SET_CONFIG = "testset.json"
+#: The work folder's config for the hybrid objective: the training config's sequences, of which
+#: ``cloth-usd datagen`` simulates :data:`HYBRID_SEQUENCES` training ones (drawn by the config's
+#: seed) with the test set's solver settings; ``train-garment --sim-data`` of that folder adds
+#: the spring toward Newton's frames to their batches.
+HYBRID_CONFIG = "hybrid.json"
+HYBRID_SEQUENCES = 10
 #: The splits the test set config simulates.
 TEST_SET_SPLITS = ("test_motion", "test_body")
 #: The simulator's settings of the test set config beyond the training config's (the material):
@@ -100,6 +106,9 @@ class OwnGarmentPlan:
     """The garment form's coarse model: Adam steps of 8 frames."""
     detail_steps: int = 1500
     """The garment form's detail model: Adam steps of 8 frames."""
+    sim_weight: float = 1.0e7
+    """The garment form's hybrid objective (``--sim-data``): the spring toward Newton's frames
+    [1/s^2] (:attr:`~cloth_usd.nn.garment_model.GarmentModelConfig.supervised_weight`)."""
 
     def __post_init__(self) -> None:
         if self.form is not None and self.form not in FORMS:
@@ -108,6 +117,8 @@ class OwnGarmentPlan:
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ArgumentError(f"--{name.replace('_', '-')} must be an integer >= 1, got {value!r}")
+        if not (isinstance(self.sim_weight, (int, float)) and self.sim_weight > 0):
+            raise ArgumentError(f"--sim-weight must be a number > 0 [1/s^2], got {self.sim_weight!r}")
 
     def coarse_config(self) -> dict:
         return {"objective": "physics", "coarse_base": "skinned", "heading": "canonical", "bending_scale": 10.0,
@@ -122,8 +133,10 @@ class OwnGarmentPlan:
     def garment_configs(self) -> dict:
         """The garment form's :class:`~cloth_usd.nn.garment_model.GarmentModelConfig` fields per tier:
         the coarse model with the stiffer bending the paper's coarse tier trains with."""
-        return {"coarse": {"steps": self.steps, "bending_scale": 10.0, "seed": self.seed},
-                "detail": {"steps": self.detail_steps, "bending_scale": 1.0, "seed": self.seed}}
+        return {"coarse": {"steps": self.steps, "bending_scale": 10.0, "seed": self.seed,
+                           "supervised_weight": self.sim_weight},
+                "detail": {"steps": self.detail_steps, "bending_scale": 1.0, "seed": self.seed,
+                           "supervised_weight": self.sim_weight}}
 
 
 @dataclass(frozen=True)
@@ -163,7 +176,7 @@ def _garment_file(i: int) -> str:
 def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
                       name: str, work_dir: str | Path | None = None,
                       motions: tuple[dict, ...] = (), test_motions: tuple[dict, ...] = (),
-                      mocap_dir: str | Path | None = None,
+                      mocap_dir: str | Path | None = None, sim_data: str | Path | None = None,
                       plan: OwnGarmentPlan = OwnGarmentPlan(), force: bool = False, device: str | None = "auto",
                       body: BodyModel | None = None,
                       progress: Callable[[str, object], None] | None = None) -> OwnGarmentResult:
@@ -181,6 +194,8 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
             as ``motions``; none: :data:`TEST_MOTIONS`. Not trained on, nor checked here (the
             test set's ``cloth-usd datagen`` reads them).
         mocap_dir: the folder the ``bvh`` entries of ``motions`` are relative to.
+        sim_data: the garment form's hybrid objective: a ``cloth-usd datagen`` folder of the work
+            folder's :data:`HYBRID_CONFIG` (Newton's frames of some training sequences).
         plan: epochs, batches and widths.
         force: replace an existing bundle, and runs this command left in ``work_dir``.
         progress: called with ``(tier, EpochRecord)`` after every epoch.
@@ -199,6 +214,8 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
         raise ArgumentError(f"train-garment: {len(garments)} garments given; the garment form learns one garment "
                             "(--form paper trains one bundle for several of a category)")
     categories = sorted({Category(g.category).value for g in garments})
+    if sim_data is not None and form != "garment":
+        raise ArgumentError("--sim-data: the hybrid objective trains the garment form (one garment) only")
     if len(categories) > 1:
         raise ArgumentError(f"train-garment: the garments are of several categories ({', '.join(categories)}); "
                             "a bundle serves one category")
@@ -230,8 +247,11 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
                                          "test_motions": list(test_motions or TEST_MOTIONS),
                                          "simulate_splits": list(TEST_SET_SPLITS)})
     if form == "garment":
+        _write_json(work / HYBRID_CONFIG, {**data, "sim": {**data["sim"], **TEST_SET_SIM}, "simulate_splits": ["train"],
+                                           "simulate_sequences": {"train": HYBRID_SEQUENCES}})
+    if form == "garment":
         return _train_garment_form(garments[0], work, out_dir, runs, name=name, category=category, plan=plan,
-                                   force=force, body=body, mocap_dir=mocap_dir, progress=progress)
+                                   force=force, body=body, mocap_dir=mocap_dir, sim_data=sim_data, progress=progress)
     _write_json(work / "coarse.json", plan.coarse_config())
     _write_json(work / "detail.json", plan.detail_config())
     seconds: dict[str, float] = {}
@@ -259,7 +279,7 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
 
 
 def _train_garment_form(garment: OwnGarment, work: Path, out_dir: Path, runs: dict, *, name: str, category: Category,
-                        plan: OwnGarmentPlan, force: bool, body: BodyModel, mocap_dir,
+                        plan: OwnGarmentPlan, force: bool, body: BodyModel, mocap_dir, sim_data,
                         progress: Callable[[str, object], None] | None) -> OwnGarmentResult:
     """:func:`train_own_garment` of the garment form: plan the sequences once, train the coarse
     and the detail garment models, export them (:mod:`cloth_usd.nn.garment_model`)."""
@@ -271,7 +291,10 @@ def _train_garment_form(garment: OwnGarment, work: Path, out_dir: Path, runs: di
         _write_json(work / f"{tier}.json", {**GarmentModelConfig(**fields).to_json(), "form": "garment"})
     seconds: dict[str, float] = {}
     began = time.perf_counter()
-    data = physics_set(work / DATA_CONFIG, body, mocap_dir=mocap_dir)
+    data = physics_set(work / DATA_CONFIG, body, mocap_dir=mocap_dir, sim_data=sim_data)
+    if sim_data is not None and not any(c.target is not None for c in data.split("train")):
+        raise ArgumentError(f"--sim-data {sim_data}: holds none of the training sequences (simulate "
+                            f"{work / HYBRID_CONFIG} into it)")
     seconds["plan"] = time.perf_counter() - began
     infos = {}
     for tier in ("coarse", "detail"):

@@ -212,3 +212,56 @@ def test_a_vertex_outside_the_body_but_far_behind_its_nearest_body_vertex_plane_
     out, _ = push_out_of_surface(garment, pts[None], normals[None], faces, np.arange(9), margin=0.002,
                                  plane_reach=np.inf)
     assert np.linalg.norm(out - garment) == pytest.approx(0.0232, abs=1e-3)
+
+
+def _square_grid(n: int = 8, h: float = 0.01):
+    """A flat n x n grid of squares of side ``h`` [m], two triangles each: (points, faces)."""
+    i, j = np.meshgrid(np.arange(n + 1), np.arange(n + 1), indexing="ij")
+    points = np.stack([i.ravel() * h, np.zeros(i.size), j.ravel() * h], axis=1).astype(np.float64)
+    v = (i[:-1, :-1] * (n + 1) + j[:-1, :-1]).ravel()
+    faces = np.concatenate([np.stack([v, v + n + 1, v + 1], 1), np.stack([v + 1, v + n + 1, v + n + 2], 1)])
+    return points, faces
+
+
+def test_the_strain_limiter_shortens_stretched_edges_and_leaves_the_rest():
+    from cloth_usd.core.postprocess import StrainLimiter, mesh_edges
+
+    rest, faces = _square_grid()
+    edges = mesh_edges(faces)
+    assert len(edges) == 8 * 9 * 2 + 8 * 8  # the grid's lines and one diagonal a square
+    lengths = lambda p: np.linalg.norm(p[..., edges[:, 1], :] - p[..., edges[:, 0], :], axis=-1)  # noqa: E731
+    limiter = StrainLimiter(rest, faces, limit=1.1)
+    # moved rigidly, bent and compressed: no edge past the limit, so nothing moves
+    turned = rest @ np.array([[0.0, 0.0, 1.0], [0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]) + [1.0, 2.0, 3.0]
+    folded = rest.copy()
+    folded[:, 1] = 0.002 * np.sin(rest[:, 0] * 40.0)  # a slope of 0.08 at most: 1.003 x longer
+    squeezed = rest * [0.7, 1.0, 1.0]
+    frames = np.stack([turned, folded, squeezed])
+    np.testing.assert_allclose(limiter(frames), frames, atol=1e-6)
+    # stretched by half along x: every edge ends within a few percent of the limit, the garment
+    # where it was (its centre stays), and the frame in the middle is limited as if alone
+    stretched = rest * [1.5, 1.0, 1.0]
+    both = np.stack([stretched, rest, stretched])
+    out = limiter(both)
+    ratio = lengths(out[0]) / lengths(rest)
+    assert (lengths(stretched) / lengths(rest)).max() == pytest.approx(1.5)
+    assert ratio.max() < 1.13, ratio.max()
+    np.testing.assert_allclose(out[0].mean(axis=0), stretched.mean(axis=0), atol=1e-4)
+    np.testing.assert_allclose(out[1], rest, atol=1e-6)
+    np.testing.assert_allclose(out[0], out[2], atol=1e-6)  # float32 solves
+
+
+def test_the_strain_limiter_leaves_a_non_finite_frame_for_the_guard_and_checks_its_arguments():
+    from cloth_usd.core.postprocess import StrainLimiter
+
+    rest, faces = _square_grid(3)
+    limiter = StrainLimiter(rest, faces)
+    broken = rest * [2.0, 1.0, 1.0]
+    broken[4] = np.nan
+    out = limiter(np.stack([broken, rest * [2.0, 1.0, 1.0]]))
+    assert np.isnan(out[0, 4]).all() and np.array_equal(out[0, :4], broken[:4])
+    assert np.linalg.norm(out[1, 1] - out[1, 0]) < 1.15 * np.linalg.norm(rest[1] - rest[0])
+    with pytest.raises(ArgumentError, match="strain limit must be"):
+        StrainLimiter(rest, faces, limit=1.0)
+    with pytest.raises(ArgumentError, match=r"expected points \(T, 16, 3\)"):
+        limiter(rest[None, :5])
