@@ -29,7 +29,9 @@ float32): the rounding moves the garment by hundredths of a millimetre, measured
 Training needs no simulation: batches of frames of the data set config's planned training
 sequences (the garment carried onto the training bodies), the quasi-static energy of
 :mod:`cloth_usd.nn.physics` (membrane, bending, gravity, the cubic contact against the
-nearest posed body vertex under the garment) minimised with Adam.
+nearest posed body vertex under the garment) minimised with Adam. With Newton's frames of
+some training sequences (``train-garment --sim-data``) the objective is hybrid: a share of the
+batches adds a spring toward them (:attr:`GarmentModelConfig.supervised_weight`).
 """
 
 from __future__ import annotations
@@ -88,7 +90,8 @@ class GarmentModelConfig:
     output_scale: float = 0.05
     """The last layer's output times this is the displacement [m]."""
     val_every: int = 250
-    """Steps between validations; the best validation energy's weights are kept."""
+    """Steps between validations; the best validation energy's weights are kept (a hybrid run
+    keeps its last: Newton's garment is not a minimum of the energy)."""
     seed: int = 0
     supervised_weight: float = 1.0e6
     """The hybrid objective (training sequences with Newton's frames): the spring toward them,
