@@ -24,7 +24,7 @@ from ..errors import ArgumentError
 from .association import closest_point_on_triangles, incident_faces
 
 __all__ = ["push_out", "push_out_of_surface", "StrainLimiter", "mesh_edges", "STRAIN_LIMIT", "STRAIN_ITERATIONS",
-           "STRAIN_ANCHOR", "STRAIN_CLEARANCE", "nearest_vertex", "nearest_body_points", "search_tree", "garment_margin", "DEFAULT_MARGIN",
+           "STRAIN_ANCHOR", "nearest_vertex", "nearest_body_points", "search_tree", "garment_margin", "DEFAULT_MARGIN",
            "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_ROUNDS", "PLANE_REACH"]
 
 #: Default clearance from the body surface [m] (2 mm).
@@ -260,10 +260,6 @@ def _closest_surface(q: np.ndarray, offset: np.ndarray, near: np.ndarray, found:
 #: keep 99% of their edges within 1.09 of rest on real clips (their longest at 1.25), where a
 #: learned garment stretches its armpits and shoulders as skinning does (1.2-1.4).
 STRAIN_LIMIT = 1.10
-#: Clearance [m] a strain-limited garment keeps from the body beyond its margin: limited, a
-#: shirt lies taut over the shoulders, and at the margin alone the body's curvature showed
-#: through between its vertices in a close-up (Newton's shirt lies about 4 mm out).
-STRAIN_CLEARANCE = 0.002
 #: Rounds of :class:`StrainLimiter` (each a local step over the edges and one sparse solve).
 STRAIN_ITERATIONS = 4
 #: How strongly :class:`StrainLimiter` holds each vertex where the models put it, against an

@@ -20,7 +20,7 @@ import numpy as np
 from ..core.body import BodyModel
 from ..core.graph import MeshGraph
 from ..core.pipeline import GarmentPair, prepare_pair, run_tiers
-from ..core.postprocess import STRAIN_CLEARANCE, STRAIN_LIMIT, StrainLimiter, garment_margin
+from ..core.postprocess import STRAIN_LIMIT, StrainLimiter, garment_margin
 from ..core.scene import Tier
 from ..core.skinning import SkinBinding
 from ..core.smpl import NUM_JOINTS
@@ -128,7 +128,6 @@ class LearnedGarment:
         if transl.shape[0] != poses.shape[0]:
             raise ArgumentError(f"poses has {poses.shape[0]} frames, transl {transl.shape[0]}")
         limiter = self.limiter if tier is Tier.DETAIL else None
-        margin = self.margin + (STRAIN_CLEARANCE if limiter is not None else 0.0)
         if self.own:
             from ..core.pipeline import run_garment_model
             from ..core.garment_inputs import garment_displacement_inputs
@@ -142,7 +141,7 @@ class LearnedGarment:
                 return sum(s.run(inputs)[OUTPUT] for s in sessions)
 
             points, moved = run_garment_model(self.body, self.pair, poses, transl, run_model, batch_size=batch_size,
-                                              margin=margin, postprocess=postprocess, limiter=limiter)
+                                              margin=self.margin, postprocess=postprocess, limiter=limiter)
             return LearnedFrames(points=points, moved=moved)
         coarse = self.bundle.session(Tier.COARSE)
         detail = self.bundle.session(Tier.DETAIL) if tier is Tier.DETAIL else None
@@ -155,6 +154,6 @@ class LearnedGarment:
 
         points, moved = run_tiers(self.body, self.pair, poses, transl, run_coarse,
                                   run_detail if detail is not None else None, batch_size=batch_size,
-                                  margin=margin, form=self.bundle.form, skinned=skinned,
+                                  margin=self.margin, form=self.bundle.form, skinned=skinned,
                                   postprocess=postprocess, limiter=limiter)
         return LearnedFrames(points=points, moved=moved)
