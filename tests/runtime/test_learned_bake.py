@@ -43,9 +43,10 @@ def test_learned_tier_bakes_the_sample(tier, tiny_bundle, skinned, tmp_path, cap
     pts = _points(cache)
     assert pts.shape == skinned.shape and np.isfinite(pts).all()
     # The stage is in metres; random tiny weights put the garment on the body (+ a few mm)
-    # where skinning keeps its rest offset: a few cm apart at most.
+    # where skinning keeps its rest offset: a few cm apart at most (the detail tier's strain limit
+    # then shortens the random garment's stretched edges, which moves it a little further).
     gap = np.linalg.norm(pts - skinned, axis=-1)
-    assert gap.mean() < 0.03 and gap.max() < 0.12, (gap.mean(), gap.max())
+    assert gap.mean() < (0.03 if tier == "coarse" else 0.04) and gap.max() < 0.12, (gap.mean(), gap.max())
     prov = Sdf.Layer.FindOrOpen(str(cache)).customLayerData["cloth_usd"]
     manifest_sha = __import__("hashlib").sha256((tiny_bundle / "manifest.json").read_bytes()).hexdigest()
     assert prov["model_bundle"] == {"name": "tiny-tshirt", "sha256": manifest_sha}
