@@ -376,9 +376,11 @@ def body_side(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndar
 
 
 def unique_edges(faces: np.ndarray) -> np.ndarray:
-    """(E', 2) int64 undirected edges of a triangle mesh, each once."""
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    return np.unique(np.sort(e, axis=1), axis=0).astype(np.int64)
+    """(E', 2) int64 undirected edges of a triangle mesh, each once
+    (:func:`~cloth_usd.core.postprocess.mesh_edges`)."""
+    from ..core.postprocess import mesh_edges
+
+    return mesh_edges(faces)
 
 
 def edge_ratios(positions: np.ndarray, rest: np.ndarray, edges: np.ndarray) -> np.ndarray:
