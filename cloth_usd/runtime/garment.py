@@ -13,6 +13,7 @@ Shape letters: T frames, N garment vertices, V body vertices, M triangles, J joi
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -67,8 +68,9 @@ class LearnedGarment:
         self.bundle = bundle
         self.body = body
         self.margin = float(margin) if margin is not None else garment_margin(rest_points, faces)
-        self.limiter = StrainLimiter(rest_points, faces, limit=strain_limit) if strain_limit is not None else None
-        """The detail tier's strain limiter (None: none)."""
+        if strain_limit is not None and not (isinstance(strain_limit, (int, float)) and strain_limit > 1):
+            raise ArgumentError(f"the strain limit must be a number > 1, got {strain_limit!r}")
+        self._limit = (np.asarray(rest_points, dtype=np.float64), np.asarray(faces), strain_limit)
         if bundle.garment is not None and not bundle.garment.serves(len(rest_points), faces):
             raise BundleError(f"{bundle.path}: bundle '{bundle.name}' was trained for one garment of "
                               f"{bundle.garment.vertices} vertices, and this garment ({len(rest_points)} vertices) is "
@@ -93,6 +95,13 @@ class LearnedGarment:
         if self.alpha.shape != (3,):
             raise BundleError(f"{bundle.path}: the fit model has {self.alpha.shape[0]} factors, "
                               "the models take 3")
+
+    @functools.cached_property
+    def limiter(self) -> StrainLimiter | None:
+        """The detail tier's strain limiter (None: none), factored when the detail tier first
+        runs: a coarse bake never builds it."""
+        rest, faces, limit = self._limit
+        return StrainLimiter(rest, faces, limit=limit) if limit is not None else None
 
     @property
     def num_vertices(self) -> int:

@@ -1,0 +1,128 @@
+"""Benchmark (not a test): where the detail tier's long edges come from, stage by stage (issue #12).
+
+For each shot (a stage ``bench/bench_mocap_tiers.py`` wrote, ``OUT/<clip>.usda``: a real clip
+wearing a garment), the detail tier of a bundle is run as a bake runs it, and its garment is
+measured after each step of the post-process: the models' garment, after the strain limiter
+(``--rounds``, each a row; 4 is what a bake runs) and after the push out of the body that follows
+it. Per row, over every ``--every``-th frame:
+
+- edge stretch against the rest garment: the median frame's 99th percentile, the worst frame's,
+  the largest edge, and the frames with an edge longer than ``--long`` (1.5) times its rest;
+- for the pushed rows: of the edges longer than ``--long`` after the push, how many already were
+  before it, and how many the push made with one end moved alone or with both ends moved in
+  opposite directions (torn between two body surfaces, e.g. a thigh raised into the belly);
+- the share of vertices inside the body (the full SMPL mesh) and deeper than 1 mm in it;
+- wall time of the step per frame.
+
+Run: python bench/bench_postprocess_stages.py --shot OUT/04.usda [--shot ...] [--bundle DIR]
+         [--rounds 4 --rounds 8] [--every 2]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cloth_usd.core.body import load_body_model, posed_vertices
+from cloth_usd.core.pipeline import pose_body
+from cloth_usd.core.postprocess import mesh_edges, push_out_of_surface
+from cloth_usd.datagen.simulate import body_side
+from cloth_usd.runtime.bundle import find_bundle, load_bundle
+from cloth_usd.runtime.garment import LearnedGarment
+from cloth_usd.usd.read import open_stage, read_scene
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_mocap_tiers import _stage_poses  # noqa: E402  (the poses as the baker reads them)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--shot", action="append", required=True, help="a stage bench_mocap_tiers.py wrote (repeatable)")
+    ap.add_argument("--bundle", help="bundle folder (default: the shipped default for the shot's garment)")
+    ap.add_argument("--rounds", action="append", type=int, help="strain limiter rounds (repeatable; default 4 and 8)")
+    ap.add_argument("--every", type=int, default=2, help="measure every n-th frame (default 2)")
+    ap.add_argument("--long", type=float, default=1.5, help="an edge this many times its rest is long (default 1.5)")
+    ap.add_argument("--out", default="out/postprocess_stages")
+    args = ap.parse_args(argv)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    body = load_body_model()
+    rows = []
+    for shot in map(Path, args.shot):
+        stage = open_stage(shot)
+        garment = read_scene(stage).garments[0]
+        bundle_dir = Path(args.bundle) if args.bundle else find_bundle(
+            garment.category, worn=(len(garment.rest_points), garment.triangles)).path
+        times = np.arange(stage.GetStartTimeCode(), stage.GetEndTimeCode() + 1)[::args.every]
+        poses = _stage_poses(shot, times, body)
+        learned = LearnedGarment(load_bundle(bundle_dir), body, poses["betas"], poses["rest"], poses["faces"])
+        edges, rest = mesh_edges(poses["faces"]), poses["rest"]
+        rest_len = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1)
+        model_poses, model_transl = poses["model_poses"], poses["model_transl"]
+        start = time.perf_counter()
+        raw = learned.evaluate("detail", model_poses, model_transl, postprocess=False).points
+        model_ms = 1e3 * (time.perf_counter() - start) / len(times)
+        posed = pose_body(body, learned.pair, model_poses, model_transl)
+        bodies = posed_vertices(body, poses["betas"], model_poses, model_transl)
+        patch = learned.pair.patch
+
+        def stretch(x):
+            return np.linalg.norm(x[:, edges[:, 1]] - x[:, edges[:, 0]], axis=2) / rest_len
+
+        def row(stage_name, x, ms, before=None):
+            s = stretch(x)
+            p99 = np.percentile(s, 99, axis=1)
+            side = np.stack([body_side(x[t], bodies[t], body.faces) for t in range(len(times))])
+            r = {"shot": shot.stem, "bundle": bundle_dir.name, "stage": stage_name, "frames": len(times),
+                 "ms_per_frame": ms, "p99_median": float(np.median(p99)), "p99_worst": float(p99.max()),
+                 "max": float(s.max()), "frames_long": int(np.sum(s.max(axis=1) > args.long)),
+                 "inside": float(np.mean(side < 0)), "inside_1mm": float(np.mean(side < -1e-3))}
+            if before is not None:  # the push: which long edges it made, and how
+                f, k = np.nonzero(s > args.long)
+                a = x[f, edges[k, 0]] - before[f, edges[k, 0]]
+                b = x[f, edges[k, 1]] - before[f, edges[k, 1]]
+                na, nb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
+                was = stretch(before)[f, k] > args.long
+                both = (na > 0) & (nb > 0) & ~was
+                r.update(long_edges=int(f.size), long_before_push=int(was.sum()),
+                         long_one_end_pushed=int(np.sum(~was & ((na > 0) != (nb > 0)))),
+                         long_torn=int(np.sum(both & (np.einsum("ic,ic->i", a, b) < 0))),
+                         long_push_mm_median=float(np.median(1e3 * np.maximum(na, nb))) if f.size else 0.0)
+            rows.append(r)
+            print(json.dumps(r), flush=True)
+
+        row("models", raw, model_ms)
+        for rounds in args.rounds or [4, 8]:
+            learned.limiter.iterations = rounds
+            start = time.perf_counter()
+            limited = learned.limiter(raw)
+            limit_ms = 1e3 * (time.perf_counter() - start) / len(times)
+            row(f"limited x{rounds}", limited, limit_ms)
+            start = time.perf_counter()
+            pushed = push_out_of_surface(limited, posed.patch_points, posed.patch_normals, patch.faces, patch.contact,
+                                         margin=learned.margin, rings=patch.rings)[0]
+            row(f"limited x{rounds}, pushed", pushed, limit_ms + 1e3 * (time.perf_counter() - start) / len(times),
+                before=limited)
+    (out / "postprocess_stages.json").write_text(json.dumps(rows, indent=1))
+    lines = ["| shot | stage | ms/frame | stretch p99 median / worst, max | frames with an edge > "
+             f"{args.long} | long edges after the push: already before / one end pushed / torn | inside "
+             "(deeper than 1 mm) |", "|---|---|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        made = (f"{r['long_edges']}: {r['long_before_push']} / {r['long_one_end_pushed']} / {r['long_torn']}"
+                if "long_edges" in r else "")
+        lines.append(f"| {r['shot']} | {r['stage']} | {r['ms_per_frame']:.1f} | {r['p99_median']:.3f} / "
+                     f"{r['p99_worst']:.3f}, {r['max']:.2f} | {r['frames_long']} / {r['frames']} | {made} | "
+                     f"{100 * r['inside']:.2f}% ({100 * r['inside_1mm']:.2f}%) |")
+    text = "\n".join(lines) + "\n"
+    (out / "postprocess_stages.md").write_text(text)
+    print(text)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
