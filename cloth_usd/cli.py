@@ -178,6 +178,10 @@ def _parser() -> argparse.ArgumentParser:
                          "add the spring toward them (the hybrid objective)")
     tg.add_argument("--sim-weight", type=float, default=1.0e7,
                     help="garment form, with --sim-data: the spring toward Newton's frames [1/s^2] (default 1e7)")
+    tg.add_argument("--sim-sequences", type=int, default=10, metavar="N",
+                    help="garment form: the training sequences WORK/hybrid.json has cloth-usd datagen simulate "
+                         "(default 10); a larger N keeps those a smaller one drew, so datagen into the same folder "
+                         "simulates only the new ones")
     tg.add_argument("--steps", type=int, default=3000,
                     help="garment form: coarse model steps of 8 frames (default 3000)")
     tg.add_argument("--detail-steps", type=int, default=1500,
@@ -569,7 +573,7 @@ def _train_garment(args: argparse.Namespace) -> int:
 
     plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches,
                           form=args.form, steps=args.steps, detail_steps=args.detail_steps,
-                          sim_weight=args.sim_weight)
+                          sim_weight=args.sim_weight, sim_sequences=args.sim_sequences)
 
     def motion_list(flag: str, path: str | None) -> tuple:
         if not path:

@@ -315,14 +315,16 @@ def train_betas(config: FactoryConfig) -> np.ndarray:
 
 def _to_simulate(config: FactoryConfig, jobs: list[Job]) -> list[Job]:
     """The planned sequences the factory simulates, in plan order: those of ``simulate_splits``,
-    ``simulate_sequences`` of them drawn at random, and every floor sequence."""
+    ``simulate_sequences`` of them drawn at random, and every floor sequence. The draw is the
+    head of one seeded order, so a larger count keeps every sequence a smaller one drew: raised
+    in the config and run again into the same folder, only the new sequences are simulated."""
     chosen = [j for j in jobs if j.meta["split"] != FLOOR_SPLIT
               and (config.simulate_splits is None or j.meta["split"] in config.simulate_splits)]
     drop: set[int] = set()
     for split, count in (config.simulate_sequences or {}).items():
         inside = [k for k, j in enumerate(chosen) if j.meta["split"] == split]
         if count < len(inside):
-            kept = np.random.default_rng(config.seed).choice(len(inside), count, replace=False)
+            kept = np.random.default_rng(config.seed).permutation(len(inside))[:count]
             drop |= set(inside) - {inside[i] for i in kept}
     return [j for k, j in enumerate(chosen) if k not in drop] + [j for j in jobs if j.meta["split"] == FLOOR_SPLIT]
 

@@ -62,9 +62,9 @@ DATA_CONFIG = "data.json"
 #: ``configs/own_garment_motions.json``; this one plans 7 for one garment and three test motions).
 TEST_SET_CONFIG = "testset.json"
 #: The work folder's config for the hybrid objective: the training config's sequences, of which
-#: ``cloth-usd datagen`` simulates :data:`HYBRID_SEQUENCES` training ones (drawn by the config's
-#: seed) with the test set's solver settings; ``train-garment --sim-data`` of that folder adds
-#: the spring toward Newton's frames to their batches.
+#: ``cloth-usd datagen`` simulates :attr:`OwnGarmentPlan.sim_sequences` training ones (by default
+#: :data:`HYBRID_SEQUENCES`, drawn by the config's seed) with the test set's solver settings;
+#: ``train-garment --sim-data`` of that folder adds the spring toward Newton's frames to their batches.
 HYBRID_CONFIG = "hybrid.json"
 HYBRID_SEQUENCES = 10
 #: The splits the test set config simulates.
@@ -109,11 +109,15 @@ class OwnGarmentPlan:
     sim_weight: float = 1.0e7
     """The garment form's hybrid objective (``--sim-data``): the spring toward Newton's frames
     [1/s^2] (:attr:`~cloth_usd.nn.garment_model.GarmentModelConfig.supervised_weight`)."""
+    sim_sequences: int = HYBRID_SEQUENCES
+    """The training sequences :data:`HYBRID_CONFIG` has ``cloth-usd datagen`` simulate. A larger
+    count keeps the sequences a smaller one drew, so a folder simulated with fewer is extended,
+    not simulated again."""
 
     def __post_init__(self) -> None:
         if self.form is not None and self.form not in FORMS:
             raise ArgumentError(f"--form must be one of {', '.join(FORMS)}, got {self.form!r}")
-        for name in ("coarse_epochs", "detail_epochs", "batches", "steps", "detail_steps"):
+        for name in ("coarse_epochs", "detail_epochs", "batches", "steps", "detail_steps", "sim_sequences"):
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ArgumentError(f"--{name.replace('_', '-')} must be an integer >= 1, got {value!r}")
@@ -248,7 +252,7 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
                                          "simulate_splits": list(TEST_SET_SPLITS)})
     if form == "garment":
         _write_json(work / HYBRID_CONFIG, {**data, "sim": {**data["sim"], **TEST_SET_SIM}, "simulate_splits": ["train"],
-                                           "simulate_sequences": {"train": HYBRID_SEQUENCES}})
+                                           "simulate_sequences": {"train": plan.sim_sequences}})
     if form == "garment":
         return _train_garment_form(garments[0], work, out_dir, runs, name=name, category=category, plan=plan,
                                    force=force, body=body, mocap_dir=mocap_dir, sim_data=sim_data, progress=progress)

@@ -164,6 +164,8 @@ def test_simulate_sequences_draws_part_of_the_plan(tmp_path, monkeypatch):
     assert chosen == [j.name for j in factory._to_simulate(config, plan_jobs(config))]  # the same draw
     other = dataclasses.replace(config, seed=1)
     assert chosen != [j.name for j in factory._to_simulate(other, plan_jobs(other))]
+    more = dataclasses.replace(config, simulate_sequences={"train": 8})  # a larger draw keeps the smaller one's
+    assert set(chosen) < {j.name for j in factory._to_simulate(more, plan_jobs(more))}
 
     draped, simulated = [], []
     monkeypatch.setattr(factory, "drape_pairs",

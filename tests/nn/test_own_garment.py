@@ -85,6 +85,8 @@ def test_train_garment_refuses_an_existing_bundle_and_a_stage_without_that_garme
     assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--form", "paper",
                  "--sim-data", str(tmp_path)]) == 2
     assert "--sim-data" in capsys.readouterr().err and not (tmp_path / "c").exists()
+    assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--sim-sequences", "0"]) == 2
+    assert "--sim-sequences" in capsys.readouterr().err and not (tmp_path / "c").exists()
 
 
 @pytest.mark.slow
@@ -131,15 +133,15 @@ def test_train_garment_of_the_garment_form_bakes_the_sample(tmp_path, capsys):
 
     out = tmp_path / "own"
     assert main(["train-garment", str(SAMPLE), "-o", str(out), "--steps", "30", "--detail-steps", "10",
-                 "--threads", "1"]) == 0
+                 "--threads", "1", "--sim-sequences", "12"]) == 0
     said = capsys.readouterr().out
     assert "coarse step 30" in said and "detail step 10" in said and "3516 vertices" in said
-    # the work folder's hybrid config: the training sequences, ten of them simulated with the
-    # test set's solver settings; the closing lines say how to train on them
+    # the work folder's hybrid config: the training sequences, --sim-sequences of them simulated
+    # with the test set's solver settings; the closing lines say how to train on them
     assert "hybrid.json" in said and "--sim-data" in said
     hybrid = load_config(tmp_path / "own.work" / "hybrid.json")
     training = load_config(tmp_path / "own.work" / "data.json")
-    assert hybrid.simulate_splits == ("train",) and hybrid.simulate_sequences == {"train": 10}
+    assert hybrid.simulate_splits == ("train",) and hybrid.simulate_sequences == {"train": 12}
     assert hybrid.sim == {**training.sim, "collider_faces": None, "self_contact": False}
     assert [j.name for j in plan_jobs(hybrid)] == [j.name for j in plan_jobs(training)]
     bundle = load_bundle(out)
