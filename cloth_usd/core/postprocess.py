@@ -260,8 +260,9 @@ def _closest_surface(q: np.ndarray, offset: np.ndarray, near: np.ndarray, found:
 #: keep 99% of their edges within 1.09 of rest on real clips (their longest at 1.25), where a
 #: learned garment stretches its armpits and shoulders as skinning does (1.2-1.4).
 STRAIN_LIMIT = 1.10
-#: Rounds of :class:`StrainLimiter` (each a local step over the edges and one sparse solve).
-STRAIN_ITERATIONS = 4
+#: Rounds of :class:`StrainLimiter` (each a local step over the edges and one sparse solve): on the
+#: sample shirt's Newton test set 2, 4, 8 and 16 rounds measured 16.81, 16.65, 16.53 and 16.46 mm.
+STRAIN_ITERATIONS = 8
 #: How strongly :class:`StrainLimiter` holds each vertex where the models put it, against an
 #: edge's pull (1: as strongly as one edge).
 STRAIN_ANCHOR = 1.0e-3
