@@ -3,7 +3,7 @@
 For each shot (a stage ``bench/bench_mocap_tiers.py`` wrote, ``OUT/<clip>.usda``: a real clip
 wearing a garment), the detail tier of a bundle is run as a bake runs it, and its garment is
 measured after each step of the post-process: the models' garment, after the strain limiter
-(``--rounds``, each a row; 4 is what a bake runs) and after the push out of the body that follows
+(``--rounds``, each a row; 8 is what a bake runs) and after the push out of the body that follows
 it. Per row, over every ``--every``-th frame:
 
 - edge stretch against the rest garment: the median frame's 99th percentile, the worst frame's,
@@ -31,7 +31,7 @@ import numpy as np
 from cloth_usd.core.body import load_body_model, posed_vertices
 from cloth_usd.core.pipeline import pose_body
 from cloth_usd.core.postprocess import mesh_edges, push_out_of_surface
-from cloth_usd.datagen.simulate import body_side
+from cloth_usd.datagen.simulate import body_side, edge_ratios
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
 from cloth_usd.runtime.garment import LearnedGarment
 from cloth_usd.usd.read import open_stage, read_scene
@@ -62,7 +62,6 @@ def main(argv=None) -> int:
         poses = _stage_poses(shot, times, body)
         learned = LearnedGarment(load_bundle(bundle_dir), body, poses["betas"], poses["rest"], poses["faces"])
         edges, rest = mesh_edges(poses["faces"]), poses["rest"]
-        rest_len = np.linalg.norm(rest[edges[:, 1]] - rest[edges[:, 0]], axis=1)
         model_poses, model_transl = poses["model_poses"], poses["model_transl"]
         start = time.perf_counter()
         raw = learned.evaluate("detail", model_poses, model_transl, postprocess=False).points
@@ -71,11 +70,8 @@ def main(argv=None) -> int:
         bodies = posed_vertices(body, poses["betas"], model_poses, model_transl)
         patch = learned.pair.patch
 
-        def stretch(x):
-            return np.linalg.norm(x[:, edges[:, 1]] - x[:, edges[:, 0]], axis=2) / rest_len
-
         def row(stage_name, x, ms, before=None):
-            s = stretch(x)
+            s = edge_ratios(x, rest, edges)
             p99 = np.percentile(s, 99, axis=1)
             side = np.stack([body_side(x[t], bodies[t], body.faces) for t in range(len(times))])
             r = {"shot": shot.stem, "bundle": bundle_dir.name, "stage": stage_name, "frames": len(times),
@@ -87,7 +83,7 @@ def main(argv=None) -> int:
                 a = x[f, edges[k, 0]] - before[f, edges[k, 0]]
                 b = x[f, edges[k, 1]] - before[f, edges[k, 1]]
                 na, nb = np.linalg.norm(a, axis=1), np.linalg.norm(b, axis=1)
-                was = stretch(before)[f, k] > args.long
+                was = edge_ratios(before, rest, edges)[f, k] > args.long
                 both = (na > 0) & (nb > 0) & ~was
                 r.update(long_edges=int(f.size), long_before_push=int(was.sum()),
                          long_one_end_pushed=int(np.sum(~was & ((na > 0) != (nb > 0)))),

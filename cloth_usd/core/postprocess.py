@@ -23,9 +23,10 @@ import numpy as np
 from ..errors import ArgumentError
 from .association import closest_point_on_triangles, incident_faces
 
-__all__ = ["push_out", "push_out_of_surface", "StrainLimiter", "mesh_edges", "STRAIN_LIMIT", "STRAIN_ITERATIONS",
-           "STRAIN_ANCHOR", "nearest_vertex", "nearest_body_points", "search_tree", "garment_margin", "DEFAULT_MARGIN",
-           "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_ROUNDS", "PLANE_REACH"]
+__all__ = ["push_out", "push_out_of_surface", "StrainLimiter", "check_strain_limit", "mesh_edges", "STRAIN_LIMIT",
+           "STRAIN_ITERATIONS", "STRAIN_ANCHOR", "nearest_vertex", "nearest_body_points", "search_tree",
+           "garment_margin", "DEFAULT_MARGIN", "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_ROUNDS",
+           "PLANE_REACH"]
 
 #: Default clearance from the body surface [m] (2 mm).
 DEFAULT_MARGIN = 0.002
@@ -275,6 +276,13 @@ def mesh_edges(faces: np.ndarray) -> np.ndarray:
     return np.unique(np.sort(e, axis=1), axis=0)
 
 
+def check_strain_limit(limit) -> None:
+    """Raise :class:`~cloth_usd.errors.ArgumentError` unless ``limit`` (a :class:`StrainLimiter`'s)
+    is a number > 1."""
+    if not (isinstance(limit, (int, float)) and limit > 1):
+        raise ArgumentError(f"the strain limit must be a number > 1, got {limit!r}")
+
+
 class StrainLimiter:
     """Shorten a garment's edges stretched past ``limit`` times their rest length, the garment
     as a whole (strain limiting as a projective-dynamics solve, Bouaziz et al. 2014).
@@ -301,8 +309,7 @@ class StrainLimiter:
         from scipy.sparse.linalg import splu
 
         rest = np.asarray(rest_points, dtype=np.float64)
-        if not (isinstance(limit, (int, float)) and limit > 1):
-            raise ArgumentError(f"the strain limit must be a number > 1, got {limit!r}")
+        check_strain_limit(limit)
         if not (isinstance(iterations, int) and iterations >= 1) or not anchor > 0:
             raise ArgumentError(f"the strain limiter needs iterations >= 1 and anchor > 0, got {iterations!r}, "
                                 f"{anchor!r}")

@@ -21,7 +21,7 @@ import numpy as np
 from ..core.body import BodyModel
 from ..core.graph import MeshGraph
 from ..core.pipeline import GarmentPair, prepare_pair, run_tiers
-from ..core.postprocess import STRAIN_LIMIT, StrainLimiter, garment_margin
+from ..core.postprocess import STRAIN_LIMIT, StrainLimiter, check_strain_limit, garment_margin
 from ..core.scene import Tier
 from ..core.skinning import SkinBinding
 from ..core.smpl import NUM_JOINTS
@@ -68,8 +68,8 @@ class LearnedGarment:
         self.bundle = bundle
         self.body = body
         self.margin = float(margin) if margin is not None else garment_margin(rest_points, faces)
-        if strain_limit is not None and not (isinstance(strain_limit, (int, float)) and strain_limit > 1):
-            raise ArgumentError(f"the strain limit must be a number > 1, got {strain_limit!r}")
+        if strain_limit is not None:  # checked now, though the limiter is built when the detail tier first runs
+            check_strain_limit(strain_limit)
         self._limit = (np.asarray(rest_points, dtype=np.float64), np.asarray(faces), strain_limit)
         if bundle.garment is not None and not bundle.garment.serves(len(rest_points), faces):
             raise BundleError(f"{bundle.path}: bundle '{bundle.name}' was trained for one garment of "
