@@ -9,7 +9,7 @@ that Blender does not ship, listed in the manifest's ``wheels`` so that Blender
 installs them with the extension (Blender 4.2+ extension wheels):
 
 - ``cloth_usd`` itself, built from this checkout (``pip wheel --no-deps .``);
-- scipy (platform wheels) and tqdm (pure Python), pinned below;
+- scipy (platform wheels), tqdm and threadpoolctl (pure Python), pinned below;
 - onnxruntime (platform wheels) for the coarse and detail tiers: it imports with numpy
   alone, so its other requirements (protobuf, sympy, ...: model tooling) are left out.
 
@@ -37,9 +37,10 @@ ADDON = ROOT / "addon"
 BLENDER_PYTHON = "3.11"
 
 #: Third-party runtime dependencies of cloth_usd that Blender lacks (cloth_usd's
-#: pyproject asks scipy>=1.11, tqdm>=4.60; scipy 1.17 needs numpy>=1.26.4 as Blender has).
+#: pyproject asks scipy>=1.11, tqdm>=4.60, threadpoolctl>=3.1; scipy 1.17 needs numpy>=1.26.4 as
+#: Blender has).
 #: onnxruntime 1.22 is the newest with a wheel for every platform below (macOS as universal2).
-BUNDLED = {"scipy": "1.17.1", "tqdm": "4.70.1", "onnxruntime": "1.22.0"}
+BUNDLED = {"scipy": "1.17.1", "tqdm": "4.70.1", "threadpoolctl": "3.8.0", "onnxruntime": "1.22.0"}
 
 #: Blender platform -> pip ``--platform`` tags to ask for, and the test a wheel's
 #: platform tag must pass to serve that platform.

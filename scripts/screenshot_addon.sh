@@ -37,10 +37,10 @@ in_root() { chroot "$ROOTFS" env -i PATH=/usr/sbin:/usr/bin:/sbin:/bin HOME=/roo
 if [ ! -x "$ROOTFS/usr/bin/blender" ]; then
     in_root bash -c 'apt-get update -q && DEBIAN_FRONTEND=noninteractive apt-get install -y -q \
         --no-install-recommends blender xvfb libgl1-mesa-dri x11-apps xdotool netpbm python3-pip \
-        python3-numpy python3-scipy python3-tqdm'
+        python3-numpy python3-scipy python3-tqdm python3-threadpoolctl'
 fi
 # cloth_usd's runtime dependency that Debian lacks (usd-core: pxr) for Blender's Python;
-# numpy, scipy and tqdm come from Debian above, cloth_usd from this checkout (/repo).
+# numpy, scipy, tqdm and threadpoolctl come from Debian above, cloth_usd from this checkout (/repo).
 # The wheel is fetched by this machine's pip (its index and certificates), installed by
 # the chroot's.
 if [ ! -d "$ROOTFS$SITE/pxr" ]; then

@@ -14,8 +14,8 @@ if [ ! -x "$VENV/bin/python" ]; then
 fi
 "$VENV/bin/python" -m pip install -q --upgrade pip
 # One resolve, so that bpy's numpy pin holds: bpy, plus what cloth_usd needs that bpy
-# lacks (scipy, tqdm), plus pytest.
-"$VENV/bin/python" -m pip install -q "bpy==$BPY" "scipy>=1.11" "tqdm>=4.60" "pytest>=8"
+# lacks (scipy, tqdm, threadpoolctl), plus pytest.
+"$VENV/bin/python" -m pip install -q "bpy==$BPY" "scipy>=1.11" "tqdm>=4.60" "threadpoolctl>=3.1" "pytest>=8"
 # cloth_usd without its dependencies: usd-core would bring a second pxr; the tests use
 # Blender's own, as the add-on does inside Blender.
 "$VENV/bin/python" -m pip install -q --no-deps -e .

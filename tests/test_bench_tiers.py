@@ -112,3 +112,22 @@ def test_failed_quantization_is_reported_not_raised(bundle_and_data, tmp_path, m
     path, failed = bench.quantize_bundle(load_bundle(bundle_and_data[0]), tmp_path / "int8")
     assert failed == {"detail": "quantization failed: NotImplementedError: no int8 kernel for OpX"}
     assert [t.value for t in load_bundle(path).tiers] == ["coarse"]
+
+
+def test_another_categorys_bundle_needs_a_garment_of_its_category(bundle_and_data, tmp_path, capsys):
+    from cloth_usd.core.scene import Tier
+    from cloth_usd.runtime.bundle import load_bundle, write_bundle
+
+    bench = _module("bench_tiers", ROOT / "bench" / "bench_tiers.py")
+    shirt, data = bundle_and_data
+    made = load_bundle(shirt)
+    dress = write_bundle(tmp_path / "dress", name="linear-dress", category="dress",
+                         coarse_onnx=made.model_path(Tier.COARSE), detail_onnx=made.model_path(Tier.DETAIL),
+                         fit_npz=data / "fit.npz", configs={},
+                         training_data={"manifest_sha256": "0" * 64, "description": "tests only"}, metrics={},
+                         opset=18)
+    assert bench.main(["--bundle", str(dress), "--no-torch", "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"bench_tiers: --bundle {dress} is a dress bundle and the made garment a T-shirt; pass --garment "
+                   "STAGE.usda with a dress")
+    assert not (tmp_path / "out").exists()

@@ -293,7 +293,10 @@ class StrainLimiter:
     solved for at once: ``(D^T D + anchor I) x = D^T targets + anchor x0``, ``D`` the edge
     difference matrix, factored once per garment. One edge at a time (Provot's projection,
     Jacobi or Gauss-Seidel) takes tens of rounds to shorten a stretched armpit; the solve moves
-    the whole region in three or four. Computed in float32, frames side by side.
+    the whole region in three or four. Computed in float32, frames side by side, on one BLAS
+    thread: SuperLU's solve calls OpenBLAS, whose second thread gained the solve nothing and,
+    spinning after it, took a core from onnxruntime's next run (``tshirt-v6``'s detail tier on a
+    4041-vertex shirt, two threads: a median 69 ms a frame, 56 with the solve on one thread).
     """
 
     def __init__(self, rest_points: np.ndarray, faces: np.ndarray, *, limit: float = STRAIN_LIMIT,
@@ -307,6 +310,7 @@ class StrainLimiter:
         """
         from scipy import sparse
         from scipy.sparse.linalg import splu
+        from threadpoolctl import ThreadpoolController
 
         rest = np.asarray(rest_points, dtype=np.float64)
         check_strain_limit(limit)
@@ -325,6 +329,7 @@ class StrainLimiter:
         self._longest = (self.limit * self.rest_lengths).astype(np.float32)[:, None]
         system = (self._dt @ self._d + self.anchor * sparse.identity(n, dtype=np.float32, format="csr")).tocsc()
         self._solve = splu(system.astype(np.float32)).solve if m else None
+        self._blas = ThreadpoolController()  # after scipy's imports: it finds the BLAS libraries loaded
 
     def __call__(self, points: np.ndarray) -> np.ndarray:
         """(T, N, 3) float64 ``points`` (T, N, 3) [m] limited (a new array; a frame with a
@@ -339,13 +344,14 @@ class StrainLimiter:
         origin = p[live].mean(axis=1, keepdims=True)  # float32 about each frame's centre, not the world origin
         x0 = np.ascontiguousarray((p[live] - origin).transpose(1, 0, 2), dtype=np.float32).reshape(n, -1)
         x = x0
-        for _ in range(self.iterations):
-            d = (self._d @ x).reshape(m, frames, 3)
-            length = np.linalg.norm(d, axis=2)
-            if not (length > self._longest).any():
-                break
-            d *= (np.minimum(length, self._longest) / np.maximum(length, 1e-12))[..., None]
-            x = self._solve(self._dt @ d.reshape(m, -1) + self.anchor * x0)
+        with self._blas.limit(limits=1, user_api="blas"):
+            for _ in range(self.iterations):
+                d = (self._d @ x).reshape(m, frames, 3)
+                length = np.linalg.norm(d, axis=2)
+                if not (length > self._longest).any():
+                    break
+                d *= (np.minimum(length, self._longest) / np.maximum(length, 1e-12))[..., None]
+                x = self._solve(self._dt @ d.reshape(m, -1) + self.anchor * x0)
         p[live] = x.reshape(n, frames, 3).transpose(1, 0, 2).astype(np.float64) + origin
         return p
 

@@ -32,7 +32,7 @@ _SCRIPT = textwrap.dedent("""
     sys.path.append(sys.argv[3])  # Blender's own site-packages, on sys.path inside Blender
     result = bpy.ops.extensions.package_install_files(
         filepath=sys.argv[1], repo="user_default", enable_on_install=True)
-    import cloth_usd, numpy, onnxruntime, pxr, scipy, tqdm
+    import cloth_usd, numpy, onnxruntime, pxr, scipy, threadpoolctl, tqdm
     scene = bpy.context.scene
     scene.cloth_usd.shot_path = sys.argv[2]
     baked = bpy.ops.cloth_usd.bake()
@@ -40,7 +40,7 @@ _SCRIPT = textwrap.dedent("""
     detail = bpy.ops.cloth_usd.bake()
     json.dump({
         "install": sorted(result), "bake": sorted(baked), "detail": sorted(detail),
-        "files": {m.__name__: m.__file__ for m in (cloth_usd, numpy, onnxruntime, pxr, scipy, tqdm)},
+        "files": {m.__name__: m.__file__ for m in (cloth_usd, numpy, onnxruntime, pxr, scipy, threadpoolctl, tqdm)},
         "objects": sorted((ob.name, ob.type, [md.type for md in ob.modifiers])
                           for ob in scene.cloth_usd.collection.objects),
     }, sys.stdout)
@@ -85,7 +85,7 @@ def test_archive_validates_installs_and_bakes_in_a_clean_blender(tmp_path):
     assert report["install"] == ["FINISHED"] and report["bake"] == ["FINISHED"]
     assert report["detail"] == ["FINISHED"]
     files = {name: Path(f) for name, f in report["files"].items()}
-    for bundled in ("cloth_usd", "scipy", "tqdm", "onnxruntime"):  # from the archive's wheels
+    for bundled in ("cloth_usd", "scipy", "tqdm", "threadpoolctl", "onnxruntime"):  # from the archive's wheels
         assert user in files[bundled].parents, f"{bundled} came from {files[bundled]}"
     assert blender_site in files["pxr"].parents  # Blender's own USD, not usd-core
     assert ["Tube", "MESH", ["MESH_SEQUENCE_CACHE"]] in report["objects"]

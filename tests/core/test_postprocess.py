@@ -251,6 +251,28 @@ def test_the_strain_limiter_shortens_stretched_edges_and_leaves_the_rest():
     np.testing.assert_allclose(out[0], out[2], atol=1e-6)  # float32 solves
 
 
+def test_the_strain_limiter_solves_on_one_blas_thread_and_gives_the_threads_back():
+    """SuperLU's solve calls OpenBLAS, whose second thread spun after it and took a core from
+    onnxruntime (tshirt-v6's detail tier at 4041 vertices: a median 69 -> 56 ms/frame)."""
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from cloth_usd.core.postprocess import StrainLimiter
+
+    def blas_threads() -> set[int]:
+        return {lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"}
+
+    rest, faces = _square_grid(4)
+    limiter = StrainLimiter(rest, faces)
+    seen, solve = [], limiter._solve
+    limiter._solve = lambda rhs: (seen.append(blas_threads()), solve(rhs))[1]
+    with threadpool_limits(limits=2, user_api="blas"):
+        out = limiter(np.stack([rest * [1.5, 1.0, 1.0]]))
+        after = blas_threads()
+    assert seen and all(threads == {1} for threads in seen), seen
+    assert after == {2}
+    assert np.isfinite(out).all()
+
+
 def test_the_strain_limiter_leaves_a_non_finite_frame_for_the_guard_and_checks_its_arguments():
     from cloth_usd.core.postprocess import StrainLimiter
 
