@@ -462,8 +462,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     p.add_argument("--data", type=Path, help="a cloth-usd datagen folder: error on its test splits")
     p.add_argument("--vertices", type=int, default=TARGET_VERTICES, help="target shirt vertex count")
     p.add_argument("--garment", type=Path, help="a stage whose garment is timed instead of a made shirt (needed for "
-                                                "a garment's own bundle: train-garment's stage; and for a dress or trousers "
-                                                "bundle)")
+                                                "a garment's own bundle: train-garment's stage; and for a dress or "
+                                                "trousers bundle)")
     p.add_argument("--frames", type=int, default=48, help="timed frames (after one warm-up batch)")
     p.add_argument("--repeats", type=int, default=3, help="timed runs of the frames; the median is reported")
     p.add_argument("--threads", type=int, default=TARGET_THREADS, help="onnxruntime intra-op (and BLAS) threads")
