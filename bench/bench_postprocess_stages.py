@@ -12,6 +12,10 @@ it. Per row, over every ``--every``-th frame:
   before it, and how many the push made with one end moved alone or with both ends moved in
   opposite directions (torn between two body surfaces, e.g. a thigh raised into the belly);
 - the share of vertices inside the body (the full SMPL mesh) and deeper than 1 mm in it;
+- the body through the garment, which the push (vertex by vertex) does not see: the body vertices
+  within 1 cm of a garment triangle (one off the garment's open edges) that lie in front of it along
+  their own normal, more than 1 mm, per frame (the specks of skin a close-up render shows through a
+  taut sleeve even when no garment vertex is inside the body);
 - wall time of the step per frame.
 
 Run: python bench/bench_postprocess_stages.py --shot OUT/04.usda [--shot ...] [--bundle DIR]
@@ -28,7 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_usd.core.association import closest_point_on_triangles, incident_faces
 from cloth_usd.core.body import load_body_model, posed_vertices
+from cloth_usd.core.features import vertex_normals
 from cloth_usd.core.pipeline import pose_body
 from cloth_usd.core.postprocess import mesh_edges, push_out_of_surface
 from cloth_usd.datagen.simulate import body_side, edge_ratios
@@ -38,6 +44,43 @@ from cloth_usd.usd.read import open_stage, read_scene
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_mocap_tiers import _stage_poses  # noqa: E402  (the poses as the baker reads them)
+
+
+#: How near [m] a body vertex must be to the garment's surface to be measured against it.
+THROUGH_REACH = 0.01
+
+
+def body_through(garment: np.ndarray, faces: np.ndarray, body_points: np.ndarray, body_normals: np.ndarray,
+                 *, reach: float = THROUGH_REACH, depth: float = 1e-3) -> int:
+    """How many body vertices (V, 3) lie more than ``depth`` [m] in front of the garment (N, 3)
+    along their unit normals (V, 3): of those within ``reach`` of a garment triangle none of whose
+    corners is on the garment's open edges, measured against the nearest such triangle."""
+    from scipy.spatial import cKDTree
+
+    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    uniq, count = np.unique(edges, axis=0, return_counts=True)
+    open_edge = np.zeros(len(garment), dtype=bool)
+    open_edge[uniq[count == 1].ravel()] = True
+    inner = faces[~open_edge[faces].any(axis=1)]
+    ring = incident_faces(inner, len(garment))
+    index = cKDTree(garment).query(body_points, k=6, distance_upper_bound=3 * reach)[1]
+    near = index[:, 0] < len(garment)
+    q, index = body_points[near], index[near]
+    found = index < len(garment)
+    tri = np.where(found[..., None], ring[np.where(found, index, 0)], -1).reshape(len(q), -1)
+    r, c = np.nonzero(tri >= 0)
+    if not r.size:
+        return 0
+    closest, _ = closest_point_on_triangles(garment[inner[tri[r, c]]], q[r])
+    d2 = np.full(tri.shape, np.inf)
+    d2[r, c] = np.einsum("ic,ic->i", closest - q[r], closest - q[r])
+    slot = np.full(tri.shape, -1, dtype=np.int64)
+    slot[r, c] = np.arange(r.size)
+    best = np.argmin(d2, axis=1)
+    pick, dist = slot[np.arange(len(q)), best], np.sqrt(d2[np.arange(len(q)), best])
+    ok = (pick >= 0) & (dist < reach)
+    ahead = np.einsum("ic,ic->i", q[ok] - closest[pick[ok]], body_normals[near][ok])
+    return int(np.count_nonzero(ahead > depth))
 
 
 def main(argv=None) -> int:
@@ -61,23 +104,27 @@ def main(argv=None) -> int:
         times = np.arange(stage.GetStartTimeCode(), stage.GetEndTimeCode() + 1)[::args.every]
         poses = _stage_poses(shot, times, body)
         learned = LearnedGarment(load_bundle(bundle_dir), body, poses["betas"], poses["rest"], poses["faces"])
-        edges, rest = mesh_edges(poses["faces"]), poses["rest"]
+        edges, rest, faces = mesh_edges(poses["faces"]), poses["rest"], np.asarray(poses["faces"], dtype=np.int64)
         model_poses, model_transl = poses["model_poses"], poses["model_transl"]
         start = time.perf_counter()
         raw = learned.evaluate("detail", model_poses, model_transl, postprocess=False).points
         model_ms = 1e3 * (time.perf_counter() - start) / len(times)
         posed = pose_body(body, learned.pair, model_poses, model_transl)
         bodies = posed_vertices(body, poses["betas"], model_poses, model_transl)
+        normals = vertex_normals(bodies, body.faces)
         patch = learned.pair.patch
 
         def row(stage_name, x, ms, before=None):
             s = edge_ratios(x, rest, edges)
             p99 = np.percentile(s, 99, axis=1)
             side = np.stack([body_side(x[t], bodies[t], body.faces) for t in range(len(times))])
+            through = np.array([body_through(x[t], faces, bodies[t], normals[t]) for t in range(len(times))])
             r = {"shot": shot.stem, "bundle": bundle_dir.name, "stage": stage_name, "frames": len(times),
                  "ms_per_frame": ms, "p99_median": float(np.median(p99)), "p99_worst": float(p99.max()),
                  "max": float(s.max()), "frames_long": int(np.sum(s.max(axis=1) > args.long)),
-                 "inside": float(np.mean(side < 0)), "inside_1mm": float(np.mean(side < -1e-3))}
+                 "inside": float(np.mean(side < 0)), "inside_1mm": float(np.mean(side < -1e-3)),
+                 "through_median": float(np.median(through)), "through_max": int(through.max()),
+                 "frames_through": int(np.count_nonzero(through))}
             if before is not None:  # the push: which long edges it made, and how
                 f, k = np.nonzero(s > args.long)
                 a = x[f, edges[k, 0]] - before[f, edges[k, 0]]
@@ -107,13 +154,15 @@ def main(argv=None) -> int:
     (out / "postprocess_stages.json").write_text(json.dumps(rows, indent=1))
     lines = ["| shot | stage | ms/frame | stretch p99 median / worst, max | frames with an edge > "
              f"{args.long} | long edges after the push: already before / one end pushed / torn | inside "
-             "(deeper than 1 mm) |", "|---|---|---:|---:|---:|---:|---:|"]
+             "(deeper than 1 mm) | body vertices through the garment: frames, median / most a frame |",
+             "|---|---|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         made = (f"{r['long_edges']}: {r['long_before_push']} / {r['long_one_end_pushed']} / {r['long_torn']}"
                 if "long_edges" in r else "")
         lines.append(f"| {r['shot']} | {r['stage']} | {r['ms_per_frame']:.1f} | {r['p99_median']:.3f} / "
                      f"{r['p99_worst']:.3f}, {r['max']:.2f} | {r['frames_long']} / {r['frames']} | {made} | "
-                     f"{100 * r['inside']:.2f}% ({100 * r['inside_1mm']:.2f}%) |")
+                     f"{100 * r['inside']:.2f}% ({100 * r['inside_1mm']:.2f}%) | {r['frames_through']} / "
+                     f"{r['frames']}, {r['through_median']:g} / {r['through_max']} |")
     text = "\n".join(lines) + "\n"
     (out / "postprocess_stages.md").write_text(text)
     print(text)
