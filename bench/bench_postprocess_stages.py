@@ -32,12 +32,13 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_usd.core.association import closest_point_on_triangles, incident_faces
+from cloth_usd.core.association import incident_faces
 from cloth_usd.core.body import load_body_model, posed_vertices
 from cloth_usd.core.features import vertex_normals
 from cloth_usd.core.pipeline import pose_body
-from cloth_usd.core.postprocess import mesh_edges, push_out_of_surface
+from cloth_usd.core.postprocess import _closest_surface, mesh_edges, push_out_of_surface
 from cloth_usd.datagen.simulate import body_side, edge_ratios
+from cloth_usd.datagen.tshirt import _boundary_vertices
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
 from cloth_usd.runtime.garment import LearnedGarment
 from cloth_usd.usd.read import open_stage, read_scene
@@ -50,36 +51,29 @@ from bench_mocap_tiers import _stage_poses  # noqa: E402  (the poses as the bake
 THROUGH_REACH = 0.01
 
 
-def body_through(garment: np.ndarray, faces: np.ndarray, body_points: np.ndarray, body_normals: np.ndarray,
-                 *, reach: float = THROUGH_REACH, depth: float = 1e-3) -> int:
+def inner_triangles(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(inner (M', 3), ring (N, D))``: a garment's triangles none of whose corners is on its
+    open edges, and the rows of them around each vertex (-1 padded), made once per garment."""
+    inner = faces[~np.isin(faces, _boundary_vertices(faces)).any(axis=1)]
+    return inner, incident_faces(inner, num_vertices)
+
+
+def body_through(garment: np.ndarray, inner: np.ndarray, ring: np.ndarray, body_points: np.ndarray,
+                 body_normals: np.ndarray, *, reach: float = THROUGH_REACH, depth: float = 1e-3) -> int:
     """How many body vertices (V, 3) lie more than ``depth`` [m] in front of the garment (N, 3)
-    along their unit normals (V, 3): of those within ``reach`` of a garment triangle none of whose
-    corners is on the garment's open edges, measured against the nearest such triangle."""
+    along their unit normals (V, 3): of those within ``reach`` of one of its ``inner`` triangles
+    (:func:`inner_triangles`), measured against the nearest."""
     from scipy.spatial import cKDTree
 
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    uniq, count = np.unique(edges, axis=0, return_counts=True)
-    open_edge = np.zeros(len(garment), dtype=bool)
-    open_edge[uniq[count == 1].ravel()] = True
-    inner = faces[~open_edge[faces].any(axis=1)]
-    ring = incident_faces(inner, len(garment))
     index = cKDTree(garment).query(body_points, k=6, distance_upper_bound=3 * reach)[1]
-    near = index[:, 0] < len(garment)
-    q, index = body_points[near], index[near]
     found = index < len(garment)
-    tri = np.where(found[..., None], ring[np.where(found, index, 0)], -1).reshape(len(q), -1)
-    r, c = np.nonzero(tri >= 0)
-    if not r.size:
-        return 0
-    closest, _ = closest_point_on_triangles(garment[inner[tri[r, c]]], q[r])
-    d2 = np.full(tri.shape, np.inf)
-    d2[r, c] = np.einsum("ic,ic->i", closest - q[r], closest - q[r])
-    slot = np.full(tri.shape, -1, dtype=np.int64)
-    slot[r, c] = np.arange(r.size)
-    best = np.argmin(d2, axis=1)
-    pick, dist = slot[np.arange(len(q)), best], np.sqrt(d2[np.arange(len(q)), best])
-    ok = (pick >= 0) & (dist < reach)
-    ahead = np.einsum("ic,ic->i", q[ok] - closest[pick[ok]], body_normals[near][ok])
+    found[found] = (ring[index[found]] >= 0).any(axis=1)  # a vertex with inner triangles around it
+    near = found.any(axis=1)
+    q = body_points[near]
+    closest, _ = _closest_surface(q, np.zeros(len(q), dtype=np.int64), np.where(found, index, 0)[near], found[near],
+                                  garment, np.zeros_like(garment), inner, ring)  # its normal is not needed
+    ok = np.linalg.norm(closest - q, axis=1) < reach
+    ahead = np.einsum("ic,ic->i", q[ok] - closest[ok], body_normals[near][ok])
     return int(np.count_nonzero(ahead > depth))
 
 
@@ -104,7 +98,8 @@ def main(argv=None) -> int:
         times = np.arange(stage.GetStartTimeCode(), stage.GetEndTimeCode() + 1)[::args.every]
         poses = _stage_poses(shot, times, body)
         learned = LearnedGarment(load_bundle(bundle_dir), body, poses["betas"], poses["rest"], poses["faces"])
-        edges, rest, faces = mesh_edges(poses["faces"]), poses["rest"], np.asarray(poses["faces"], dtype=np.int64)
+        edges, rest = mesh_edges(poses["faces"]), poses["rest"]
+        inner, ring = inner_triangles(np.asarray(poses["faces"], dtype=np.int64), len(rest))
         model_poses, model_transl = poses["model_poses"], poses["model_transl"]
         start = time.perf_counter()
         raw = learned.evaluate("detail", model_poses, model_transl, postprocess=False).points
@@ -118,7 +113,7 @@ def main(argv=None) -> int:
             s = edge_ratios(x, rest, edges)
             p99 = np.percentile(s, 99, axis=1)
             side = np.stack([body_side(x[t], bodies[t], body.faces) for t in range(len(times))])
-            through = np.array([body_through(x[t], faces, bodies[t], normals[t]) for t in range(len(times))])
+            through = np.array([body_through(x[t], inner, ring, bodies[t], normals[t]) for t in range(len(times))])
             r = {"shot": shot.stem, "bundle": bundle_dir.name, "stage": stage_name, "frames": len(times),
                  "ms_per_frame": ms, "p99_median": float(np.median(p99)), "p99_worst": float(p99.max()),
                  "max": float(s.max()), "frames_long": int(np.sum(s.max(axis=1) > args.long)),

@@ -36,9 +36,9 @@ import numpy as np
 import torch
 
 from cloth_usd.core.body import load_body_model
-from cloth_usd.core.garment_inputs import SHAPE_FEATURES, pose_features, shape_features, skin_parts
+from cloth_usd.core.garment_inputs import POSE_FEATURES, SHAPE_FEATURES, pose_features, shape_features, skin_parts
 from cloth_usd.errors import ClothUsdError
-from cloth_usd.nn.garment_model import GarmentNet
+from cloth_usd.nn.garment_model import GarmentNet, _first
 from cloth_usd.nn.physics_train import physics_set
 
 #: The motion inputs' scales, so that a brisk motion's features are about as large as the pose's.
@@ -74,7 +74,7 @@ class Clip:
 
     def __init__(self, source, body, motion: bool) -> None:
         self.source, self.body = source, body
-        self.first = min(int(source.meta.get("warmup_frames", 0)), source.num_frames - 1)
+        self.first = _first(source)  # the first frame after the warm-up, as training takes it
         pose = pose_features(source.poses)
         if motion:
             pose = np.concatenate([pose, motion_features(source)], axis=1)
@@ -184,12 +184,10 @@ def main(argv=None) -> int:
         test = [Clip(c, body, motion) for c in tested]
         if skinning is None:
             skinning = test_mm(None, test)
-        width = train[0].pose.shape[1]
+        extra = train[0].pose.shape[1] - POSE_FEATURES  # the motion features' width (0: none)
 
-        def make_net(width=width):
-            if width == pose_features(np.zeros((1, 72))).shape[1]:
-                return GarmentNet(n)
-            return MotionNet(n, width - pose_features(np.zeros((1, 72))).shape[1])
+        def make_net(extra=extra):
+            return MotionNet(n, extra) if extra else GarmentNet(n)
 
         for count in counts:
             for seed in seeds:
