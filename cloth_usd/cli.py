@@ -178,6 +178,10 @@ def _parser() -> argparse.ArgumentParser:
                          "add the spring toward them (the hybrid objective)")
     tg.add_argument("--sim-weight", type=float, default=1.0e7,
                     help="garment form, with --sim-data: the spring toward Newton's frames [1/s^2] (default 1e7)")
+    tg.add_argument("--coarse-target", choices=("simulation", "taubin"), default="simulation",
+                    help="garment form, with --sim-data: the coarse model learns Newton's frames (simulation, the "
+                         "default) or them Taubin-smoothed (taubin: the paper's coarse tier, the wrinkles left to "
+                         "the detail model)")
     tg.add_argument("--sim-sequences", type=int, default=10, metavar="N",
                     help="garment form: the training sequences WORK/hybrid.json has cloth-usd datagen simulate "
                          "(default 10); a larger N keeps those a smaller one drew, so datagen into the same folder "
@@ -573,7 +577,8 @@ def _train_garment(args: argparse.Namespace) -> int:
 
     plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches,
                           form=args.form, steps=args.steps, detail_steps=args.detail_steps,
-                          sim_weight=args.sim_weight, sim_sequences=args.sim_sequences)
+                          sim_weight=args.sim_weight, sim_sequences=args.sim_sequences,
+                          coarse_target=args.coarse_target)
 
     def motion_list(flag: str, path: str | None) -> tuple:
         if not path:

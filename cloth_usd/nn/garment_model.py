@@ -69,6 +69,10 @@ RUN, MODEL, HISTORY = "run.json", "model.pt", "history.csv"
 RUN_KIND = "garment-model"
 
 
+#: :attr:`GarmentModelConfig.sim_target`'s values.
+SIM_TARGETS = ("simulation", "taubin")
+
+
 @dataclass(frozen=True)
 class GarmentModelConfig:
     """One garment model's training (a ``cloth-usd train-garment`` run of the ``garment`` form)."""
@@ -101,6 +105,10 @@ class GarmentModelConfig:
     16.65 mm, 1e6 18.91."""
     supervised_share: float = 0.5
     """The hybrid objective: the share of the batches drawn from the simulated sequences."""
+    sim_target: str = "simulation"
+    """The hybrid objective's target: Newton's frames (``simulation``), or them Taubin-smoothed
+    (``taubin``, coarse tier only: the paper's coarse ground truth, the wrinkles left to the detail
+    tier; :attr:`~cloth_usd.nn.data.CoarseTarget.TAUBIN`)."""
 
     def __post_init__(self) -> None:
         for name in ("hidden", "layers", "steps", "batch", "val_every"):
@@ -113,6 +121,9 @@ class GarmentModelConfig:
             value = getattr(self, name)
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
                 raise ArgumentError(f"garment model {name} must be a number > 0, got {value!r}")
+        if self.sim_target not in SIM_TARGETS:
+            raise ArgumentError(f"garment model sim_target must be one of {', '.join(SIM_TARGETS)}, "
+                                f"got {self.sim_target!r}")
 
     def to_json(self) -> dict:
         return dataclasses.asdict(self)
@@ -216,6 +227,24 @@ def _prepared(clips) -> list[_Clip]:
             for c in clips]
 
 
+def _sim_targets(clips: Sequence[_Clip], how: str) -> dict[int, np.ndarray]:
+    """The hybrid objective's target of each clip with Newton's frames, by its index: the frames
+    themselves, or (``taubin``) them smoothed as the paper's coarse ground truth is."""
+    from ..core.mesh import laplacian_smooth
+    from .data import TAUBIN_LAMBDA, TAUBIN_MU, TAUBIN_PASSES
+
+    out = {}
+    for k, c in enumerate(clips):
+        target = c.source.target
+        if target is None:
+            continue
+        if how == "taubin":
+            target = laplacian_smooth(target, c.source.pair.faces, iterations=TAUBIN_PASSES, lam=TAUBIN_LAMBDA,
+                                      mu=TAUBIN_MU)
+        out[k] = target
+    return out
+
+
 def _first(clip) -> int:
     return min(int(clip.meta.get("warmup_frames", 0)), clip.num_frames - 1)
 
@@ -306,8 +335,12 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     decay = (config.lr_final / config.lr) ** (1.0 / max(config.steps, 1))
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, decay)
+    if tier is Tier.DETAIL and config.sim_target != "simulation":
+        raise ArgumentError(f"a garment model's detail tier trains toward Newton's frames themselves "
+                            f"(sim_target simulation), not {config.sim_target!r}")
+    targets = _sim_targets(train, config.sim_target)
     examples = [(k, t) for k, c in enumerate(train) for t in range(_first(c.source), c.source.num_frames)]
-    simulated = [(k, t) for k, t in examples if train[k].source.target is not None]
+    simulated = [(k, t) for k, t in examples if k in targets]
     share = config.supervised_share if simulated else 0.0
     run = Path(run_dir)
     run.mkdir(parents=True, exist_ok=True)
@@ -332,7 +365,7 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
         if supervised:
             from .physics_train import _spring
 
-            target = torch.from_numpy(clip.source.target[frames])
+            target = torch.from_numpy(targets[k][frames])
             loss = loss + _spring(clip.source, x, target, config.supervised_weight).mean()
             sim_mm.append(1000 * float((x.detach() - target.to(x)).norm(dim=-1).mean()))
         if not torch.isfinite(loss):
@@ -373,7 +406,7 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
             "hybrid": None if not simulated else {
                 "simulated_sequences": len({k for k, _ in simulated}), "simulated_frames": len(simulated),
                 "supervised_weight": config.supervised_weight, "supervised_weight_unit": "1/s^2",
-                "supervised_share": config.supervised_share},
+                "supervised_share": config.supervised_share, "sim_target": config.sim_target},
             "coarse_run": record_coarse}
     (run / RUN).write_text(json.dumps(info, indent=1) + "\n")
     return info

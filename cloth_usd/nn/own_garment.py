@@ -109,6 +109,10 @@ class OwnGarmentPlan:
     sim_weight: float = 1.0e7
     """The garment form's hybrid objective (``--sim-data``): the spring toward Newton's frames
     [1/s^2] (:attr:`~cloth_usd.nn.garment_model.GarmentModelConfig.supervised_weight`)."""
+    coarse_target: str = "simulation"
+    """The garment form's coarse model, with ``--sim-data``: trained toward Newton's frames
+    (``simulation``) or toward them Taubin-smoothed (``taubin``, the paper's coarse ground truth;
+    :attr:`~cloth_usd.nn.garment_model.GarmentModelConfig.sim_target`)."""
     sim_sequences: int = HYBRID_SEQUENCES
     """The training sequences :data:`HYBRID_CONFIG` has ``cloth-usd datagen`` simulate. A larger
     count keeps the sequences a smaller one drew, so a folder simulated with fewer is extended,
@@ -121,6 +125,8 @@ class OwnGarmentPlan:
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ArgumentError(f"--{name.replace('_', '-')} must be an integer >= 1, got {value!r}")
+        if self.coarse_target not in ("simulation", "taubin"):
+            raise ArgumentError(f"--coarse-target must be simulation or taubin, got {self.coarse_target!r}")
         if not (isinstance(self.sim_weight, (int, float)) and self.sim_weight > 0):
             raise ArgumentError(f"--sim-weight must be a number > 0 [1/s^2], got {self.sim_weight!r}")
 
@@ -138,7 +144,7 @@ class OwnGarmentPlan:
         """The garment form's :class:`~cloth_usd.nn.garment_model.GarmentModelConfig` fields per tier:
         the coarse model with the stiffer bending the paper's coarse tier trains with."""
         return {"coarse": {"steps": self.steps, "bending_scale": 10.0, "seed": self.seed,
-                           "supervised_weight": self.sim_weight},
+                           "supervised_weight": self.sim_weight, "sim_target": self.coarse_target},
                 "detail": {"steps": self.detail_steps, "bending_scale": 1.0, "seed": self.seed,
                            "supervised_weight": self.sim_weight}}
 

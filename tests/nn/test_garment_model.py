@@ -113,6 +113,45 @@ def test_newton_frames_of_a_training_sequence_pull_the_model_toward_them(own, tm
     assert physics_only["hybrid"] is None
 
 
+def test_the_coarse_model_can_learn_newtons_frames_smoothed_as_the_papers_coarse_tier(own, tmp_path):
+    """sim_target taubin: the spring pulls toward Newton's frames with their wrinkles smoothed out
+    (the paper's coarse ground truth); the detail tier refuses it, an unknown target is one line."""
+    import dataclasses
+
+    from cloth_usd.core.mesh import laplacian_smooth
+    from cloth_usd.nn.data import TAUBIN_LAMBDA, TAUBIN_MU, TAUBIN_PASSES
+    from cloth_usd.nn.garment_model import (GarmentModelConfig, _garment, _prepared, _sim_targets,
+                                            train_garment_model)
+
+    root, body, data, *_ = own
+    first = data.split("train")[0]
+    frames = np.arange(first.num_frames)
+    skinned = _garment(None, _prepared([first])[0], frames, body).numpy()
+    wrinkles = np.random.default_rng(0).normal(0.0, 0.004, skinned.shape)  # 4 mm of vertex-sized detail
+    target = (skinned - [0.0, 0.02, 0.0] + wrinkles).astype(np.float32)
+    clips = tuple(dataclasses.replace(c, target=target) if c is first else c for c in data.clips)
+    hybrid = dataclasses.replace(data, clips=clips)
+    prepared = _prepared(hybrid.split("train"))
+    assert _sim_targets(prepared, "simulation")[0] is target and len(_sim_targets(prepared, "taubin")) == 1
+    smooth = _sim_targets(prepared, "taubin")[0]
+    np.testing.assert_allclose(smooth, laplacian_smooth(target, first.pair.faces, iterations=TAUBIN_PASSES,
+                                                        lam=TAUBIN_LAMBDA, mu=TAUBIN_MU), atol=1e-6)
+    # the detail is gone, the garment's place is kept
+    clean = skinned - [0.0, 0.02, 0.0]
+    off = lambda x: np.linalg.norm(x - clean, axis=-1).mean()
+    assert off(smooth) < 0.6 * off(target), (off(smooth), off(target))
+    assert np.abs(smooth.mean(axis=1) - target.mean(axis=1)).max() < 1e-3
+    cfg = GarmentModelConfig(steps=20, val_every=10, hidden=32, layers=2, bending_scale=10.0, lr=2e-2,
+                             supervised_share=1.0, supervised_weight=1e8, sim_target="taubin")
+    info = train_garment_model(root / "data.json", tmp_path / "taubin", cfg, body=body, physics=hybrid)
+    assert info["hybrid"]["sim_target"] == "taubin" and info["config"]["sim_target"] == "taubin"
+    with pytest.raises(ArgumentError, match="detail tier trains toward Newton's frames themselves"):
+        train_garment_model(root / "data.json", tmp_path / "detail", cfg, tier="detail", coarse_run=root / "coarse",
+                            body=body, physics=hybrid)
+    with pytest.raises(ArgumentError, match="sim_target must be one of simulation, taubin"):
+        GarmentModelConfig(sim_target="smooth")
+
+
 def test_export_writes_a_bundle_bound_to_the_garment_that_animates_it(own, tmp_path):
     from cloth_usd.core.garment_inputs import garment_displacement_inputs
     from cloth_usd.core.heading import heading_frame
