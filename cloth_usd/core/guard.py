@@ -92,7 +92,8 @@ def check_frames(points: np.ndarray, skinned: np.ndarray, rest: np.ndarray, edge
         if not finite[t]:
             reasons.append("not finite")
         elif offset[t] > limits.max_offset:
-            reasons.append(f"a vertex {offset[t]:.2f} m from its skinned position (limit {limits.max_offset:g} m)")
+            reasons.append(f"a vertex {1e3 * offset[t]:.1f} mm from its skinned position "
+                           f"(limit {1e3 * limits.max_offset:g} mm)")
         elif stretch[t] > limits.stretch:
             reasons.append(f"edges stretched {stretch[t]:.2f}x at the {limits.stretch_quantile * 100:g}th "
                            f"percentile (limit {limits.stretch:g}x)")

@@ -35,7 +35,11 @@ def test_each_kind_of_fault_is_named():
     assert faults.reasons[1] == "not finite"
     assert faults.reasons[3].startswith("edges stretched") and "90th percentile (limit 2x)" in faults.reasons[3]
     tight = check_frames(_frames(far), _frames(_GRID), _GRID, _EDGES, GuardLimits(max_offset=0.15))
-    assert tight.reasons == ("a vertex 0.20 m from its skinned position (limit 0.15 m)",)
+    # in mm, to a tenth: a vertex just past the limit does not read as at it
+    assert tight.reasons == ("a vertex 200.0 mm from its skinned position (limit 150 mm)",)
+    edge = check_frames(_frames(_GRID + [0.0, 0.0, 0.1504]), _frames(_GRID), _GRID, _EDGES,
+                        GuardLimits(max_offset=0.15))
+    assert edge.reasons == ("a vertex 150.4 mm from its skinned position (limit 150 mm)",)
 
 
 def test_stretch_is_measured_against_the_skinned_edge_where_skinning_stretches():
