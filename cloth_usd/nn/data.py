@@ -258,14 +258,19 @@ class CoarseTarget(str, enum.Enum):
 TAUBIN_PASSES, TAUBIN_LAMBDA, TAUBIN_MU = 10, 0.5, -0.53
 
 
-def with_coarse_target(data: DataSet, target: CoarseTarget | str) -> DataSet:
-    """``data`` with every clip's :attr:`Clip.coarse` made the ``target`` way (itself for STORED)."""
+def taubin_smooth(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """A simulated garment (T, N, 3) with its wrinkles smoothed out as the :attr:`CoarseTarget.TAUBIN`
+    target is (the garment's size kept), in the dtype it came in."""
     from ..core.mesh import laplacian_smooth
 
+    return laplacian_smooth(positions, faces, iterations=TAUBIN_PASSES, lam=TAUBIN_LAMBDA, mu=TAUBIN_MU)
+
+
+def with_coarse_target(data: DataSet, target: CoarseTarget | str) -> DataSet:
+    """``data`` with every clip's :attr:`Clip.coarse` made the ``target`` way (itself for STORED)."""
     if CoarseTarget(target) is CoarseTarget.STORED:
         return data
-    clips = _in_threads(lambda c: dataclasses.replace(c, coarse=laplacian_smooth(
-        c.positions, c.pair.faces, iterations=TAUBIN_PASSES, lam=TAUBIN_LAMBDA, mu=TAUBIN_MU)), data.clips)
+    clips = _in_threads(lambda c: dataclasses.replace(c, coarse=taubin_smooth(c.positions, c.pair.faces)), data.clips)
     return dataclasses.replace(data, clips=clips)
 
 

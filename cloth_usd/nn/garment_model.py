@@ -230,18 +230,13 @@ def _prepared(clips) -> list[_Clip]:
 def _sim_targets(clips: Sequence[_Clip], how: str) -> dict[int, np.ndarray]:
     """The hybrid objective's target of each clip with Newton's frames, by its index: the frames
     themselves, or (``taubin``) them smoothed as the paper's coarse ground truth is."""
-    from ..core.mesh import laplacian_smooth
-    from .data import TAUBIN_LAMBDA, TAUBIN_MU, TAUBIN_PASSES
+    from .data import taubin_smooth
 
     out = {}
     for k, c in enumerate(clips):
         target = c.source.target
-        if target is None:
-            continue
-        if how == "taubin":
-            target = laplacian_smooth(target, c.source.pair.faces, iterations=TAUBIN_PASSES, lam=TAUBIN_LAMBDA,
-                                      mu=TAUBIN_MU)
-        out[k] = target
+        if target is not None:
+            out[k] = taubin_smooth(target, c.source.pair.faces) if how == "taubin" else target
     return out
 
 
@@ -306,6 +301,9 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
     if (tier is Tier.DETAIL) != (coarse_run is not None):
         raise ArgumentError("a garment model's detail tier trains on its coarse run (and only it does): "
                             "give coarse_run for detail, none for coarse")
+    if tier is Tier.DETAIL and config.sim_target != "simulation":
+        raise ArgumentError(f"a garment model's detail tier trains toward Newton's frames themselves "
+                            f"(sim_target simulation), not {config.sim_target!r}")
     body = body if body is not None else load_body_model()
     torch.manual_seed(config.seed)
     rng = np.random.default_rng(config.seed)
@@ -335,9 +333,6 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     decay = (config.lr_final / config.lr) ** (1.0 / max(config.steps, 1))
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, decay)
-    if tier is Tier.DETAIL and config.sim_target != "simulation":
-        raise ArgumentError(f"a garment model's detail tier trains toward Newton's frames themselves "
-                            f"(sim_target simulation), not {config.sim_target!r}")
     targets = _sim_targets(train, config.sim_target)
     examples = [(k, t) for k, c in enumerate(train) for t in range(_first(c.source), c.source.num_frames)]
     simulated = [(k, t) for k, t in examples if k in targets]

@@ -388,11 +388,9 @@ def _sim_frames(sim_data: Path, entry: dict, job, config_path: Path,
         return shard.positions.astype(np.float32)
     if CoarseTarget(sim_target) is CoarseTarget.STORED:
         return shard.coarse.astype(np.float32)
-    from ..core.mesh import laplacian_smooth
-    from .data import TAUBIN_LAMBDA, TAUBIN_MU, TAUBIN_PASSES
+    from .data import taubin_smooth
 
-    return laplacian_smooth(shard.positions.astype(np.float64), shard.garment_faces, iterations=TAUBIN_PASSES,
-                            lam=TAUBIN_LAMBDA, mu=TAUBIN_MU).astype(np.float32)
+    return taubin_smooth(shard.positions.astype(np.float64), shard.garment_faces).astype(np.float32)
 
 
 def _motion_rates(factory, config_path: Path) -> dict[str, float]:
