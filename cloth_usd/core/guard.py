@@ -30,9 +30,16 @@ __all__ = ["GuardLimits", "FrameFaults", "check_frames"]
 class GuardLimits:
     """When a learned frame is not a garment."""
 
-    max_offset: float = 0.15
-    """Largest distance [m] of any vertex from its skinned position. On the sample walk the
-    shipped tiers stay within 66 mm (coarse) and 92 mm (detail)."""
+    max_offset: float = 0.5
+    """Largest distance [m] of any vertex from its skinned position: a vertex thrown off the
+    garment. Not a tight bound: where the hips bend, a hem that hangs as cloth does is far from
+    skinning's, which follows the thighs. Newton's own shirt goes up to 387 mm from skinning in
+    the 52 simulated training sequences of the sample shirt (213 mm in its test set, and past
+    150 mm in 11% of the test frames)."""
+    median_offset: float = 0.1
+    """Largest distance [m] of the frame's median vertex from its skinned position: a garment
+    moved as a whole (crumpled, thrown). Newton's shirt's median vertex stays within 59 mm of
+    skinning in those sequences (37 mm in the test set)."""
     stretch: float = 2.0
     """Largest allowed :attr:`stretch_quantile` of the frame's edge stretch (edge length over
     the longer of its rest and skinned lengths). On the sample walk the shipped tiers' 99th
@@ -44,10 +51,11 @@ class GuardLimits:
     displacement is no tear on a garment whose edges are millimetres long."""
 
     def __post_init__(self) -> None:
-        if not (self.max_offset > 0 and self.stretch > 1 and 0 < self.stretch_quantile <= 1 and self.min_edge > 0):
-            raise ArgumentError(f"GuardLimits: need max_offset > 0, stretch > 1, 0 < stretch_quantile <= 1 and "
-                                f"min_edge > 0, got {self.max_offset}, {self.stretch}, {self.stretch_quantile}, "
-                                f"{self.min_edge}")
+        if not (self.max_offset > 0 and self.median_offset > 0 and self.stretch > 1
+                and 0 < self.stretch_quantile <= 1 and self.min_edge > 0):
+            raise ArgumentError(f"GuardLimits: need max_offset > 0, median_offset > 0, stretch > 1, "
+                                f"0 < stretch_quantile <= 1 and min_edge > 0, got {self.max_offset}, "
+                                f"{self.median_offset}, {self.stretch}, {self.stretch_quantile}, {self.min_edge}")
 
 
 @dataclass(frozen=True)
@@ -79,7 +87,9 @@ def check_frames(points: np.ndarray, skinned: np.ndarray, rest: np.ndarray, edge
     num_t = points.shape[0]
     finite = np.isfinite(points).all(axis=(1, 2))
     safe = np.where(finite[:, None, None], points, skinned)
-    offset = np.linalg.norm(safe - skinned, axis=-1).max(axis=1, initial=0.0)
+    distance = np.linalg.norm(safe - skinned, axis=-1)
+    offset = distance.max(axis=1, initial=0.0)
+    median = np.median(distance, axis=1) if distance.shape[1] else np.zeros(num_t)
     stretch = np.ones(num_t)
     if len(edges):
         a, b = edges[:, 0], edges[:, 1]
@@ -94,6 +104,9 @@ def check_frames(points: np.ndarray, skinned: np.ndarray, rest: np.ndarray, edge
         elif offset[t] > limits.max_offset:
             reasons.append(f"a vertex {1e3 * offset[t]:.1f} mm from its skinned position "
                            f"(limit {1e3 * limits.max_offset:g} mm)")
+        elif median[t] > limits.median_offset:
+            reasons.append(f"half its vertices over {1e3 * median[t]:.1f} mm from their skinned positions "
+                           f"(limit {1e3 * limits.median_offset:g} mm)")
         elif stretch[t] > limits.stretch:
             reasons.append(f"edges stretched {stretch[t]:.2f}x at the {limits.stretch_quantile * 100:g}th "
                            f"percentile (limit {limits.stretch:g}x)")

@@ -30,8 +30,8 @@ def test_each_kind_of_fault_is_named():
     far[:] += [0.0, 0.0, 0.2]  # the whole garment 20 cm off
     torn[[2, 5, 8], 0] += 0.2  # one column pulled 20 cm out: its edges stretch 4-5x
     faults = check_frames(_frames(_GRID, nan, far, torn), skinned, _GRID, _EDGES,
-                          GuardLimits(max_offset=0.25, stretch_quantile=0.9))
-    assert faults.ok.tolist() == [True, False, True, False]  # 20 cm off is within this 25 cm limit
+                          GuardLimits(max_offset=0.25, median_offset=0.25, stretch_quantile=0.9))
+    assert faults.ok.tolist() == [True, False, True, False]  # 20 cm off is within these 25 cm limits
     assert faults.reasons[1] == "not finite"
     assert faults.reasons[3].startswith("edges stretched") and "90th percentile (limit 2x)" in faults.reasons[3]
     tight = check_frames(_frames(far), _frames(_GRID), _GRID, _EDGES, GuardLimits(max_offset=0.15))
@@ -40,6 +40,22 @@ def test_each_kind_of_fault_is_named():
     edge = check_frames(_frames(_GRID + [0.0, 0.0, 0.1504]), _frames(_GRID), _GRID, _EDGES,
                         GuardLimits(max_offset=0.15))
     assert edge.reasons == ("a vertex 150.4 mm from its skinned position (limit 150 mm)",)
+
+
+def test_a_hem_far_from_skinning_passes_a_garment_moved_whole_does_not():
+    """Where the hips bend skinning lifts the hem with the thighs and cloth hangs: Newton's own
+    shirt goes up to 387 mm from skinning. A garment whose median vertex is far is not a garment."""
+    lifted = _GRID.copy()
+    lifted[6:, 1] += 0.2  # skinning moves the hem row 20 cm; the learned garment hangs flat
+    hem = check_frames(_frames(_GRID), _frames(lifted), _GRID, _EDGES)
+    assert hem.ok.tolist() == [True]
+    assert not check_frames(_frames(_GRID), _frames(lifted), _GRID, _EDGES, GuardLimits(max_offset=0.15)).ok[0]
+    whole = check_frames(_frames(_GRID + [0.0, 0.12, 0.0]), _frames(_GRID), _GRID, _EDGES)
+    assert whole.reasons == ("half its vertices over 120.0 mm from their skinned positions (limit 100 mm)",)
+    thrown = _GRID.copy()
+    thrown[8] += [0.0, 0.6, 0.0]  # one vertex 60 cm off
+    spike = check_frames(_frames(thrown), _frames(_GRID), _GRID, _EDGES, GuardLimits(stretch=100.0))
+    assert spike.reasons == ("a vertex 600.0 mm from its skinned position (limit 500 mm)",)
 
 
 def test_stretch_is_measured_against_the_skinned_edge_where_skinning_stretches():
