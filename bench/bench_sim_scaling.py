@@ -13,7 +13,11 @@ their error is the supervised part's alone, measured side by side in one run.
 ``--motion`` adds a second model per count and seed whose inputs also hold the motion (the
 pose features' velocity and acceleration over the last two frames, and the root's, in the
 frame the models see): how much a model that knows how the body moves would gain over the
-per-frame one the bundles ship.
+per-frame one the bundles ship. ``--mirror`` adds a model per count and seed fitted on the
+sequences and their mirror images, left for right (:mod:`cloth_usd.nn.mirror`): twice the
+frames from the same simulations. ``--hidden``, ``--layers``, ``--steps``, ``--weight-decay``
+and ``--drop-joints`` (the pose of joints far from the garment zeroed) probe whether the model's
+size, its training or its inputs limit the error rather than the data.
 
 Inputs: ``--work`` a ``train-garment`` work folder (its ``data.json`` plans the sequences, its
 ``testset.json`` the test set's), ``--sim-data`` the ``cloth-usd datagen`` folder of its
@@ -21,7 +25,8 @@ Inputs: ``--work`` a ``train-garment`` work folder (its ``data.json`` plans the 
 ``testset.json``. Writes ``OUT/sim_scaling.md`` (also printed) and ``OUT/sim_scaling.json``.
 
 Run: python bench/bench_sim_scaling.py --work WORK --sim-data HYB --test-data TSS --mocap MOCAP
-         [--counts 2,4,8,16] [--seeds 0,1] [--steps 3000] [--motion] [--out out/sim_scaling]
+         [--counts 2,4,8,16] [--seeds 0,1] [--steps 3000] [--hidden 256] [--layers 3] [--weight-decay 0]
+         [--drop-joints J,J,...] [--motion] [--mirror] [--out out/sim_scaling]
 """
 
 from __future__ import annotations
@@ -39,6 +44,7 @@ from cloth_usd.core.body import load_body_model
 from cloth_usd.core.garment_inputs import POSE_FEATURES, SHAPE_FEATURES, pose_features, shape_features, skin_parts
 from cloth_usd.errors import ClothUsdError
 from cloth_usd.nn.garment_model import GarmentNet, _first
+from cloth_usd.nn.mirror import mirror_map, mirrored_clip
 from cloth_usd.nn.physics_train import physics_set
 
 #: The motion inputs' scales, so that a brisk motion's features are about as large as the pose's.
@@ -58,6 +64,11 @@ def motion_features(clip) -> np.ndarray:
     fps = clip.fps
     return np.concatenate([(f - f1) * fps * VELOCITY_SCALE, (f - 2 * f1 + f2) * fps ** 2 * ACCELERATION_SCALE,
                            (root - r1) * fps, (root - 2 * r1 + r2) * fps ** 2 * ROOT_ACCELERATION_SCALE], axis=1)
+
+
+def mirrored(clip):
+    """A simulated sequence mirrored left for right (:mod:`cloth_usd.nn.mirror`)."""
+    return mirrored_clip(clip, mirror_map(clip.rest_points, clip.pair.faces, name=clip.name))
 
 
 class MotionNet(GarmentNet):
@@ -103,12 +114,12 @@ def test_mm(net, clips: list[Clip]) -> float:
 
 
 def fit(clips: list[Clip], make_net, *, steps: int, seed: int, batch: int = 8, lr: float = 1e-3,
-        lr_final: float = 1e-4) -> torch.nn.Module:
+        lr_final: float = 1e-4, weight_decay: float = 0.0) -> torch.nn.Module:
     """Adam on the squared distance to Newton's frames (``batch`` frames of one sequence a step)."""
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     net = make_net()
-    opt = torch.optim.Adam(net.parameters(), lr=lr)
+    opt = torch.optim.Adam(net.parameters(), lr=lr, weight_decay=weight_decay)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, (lr_final / lr) ** (1.0 / max(steps, 1)))
     for _ in range(steps):
         c = clips[int(rng.integers(len(clips)))]
@@ -138,17 +149,25 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", default="0,1", help="seeds per count, comma separated")
     ap.add_argument("--order-seed", type=int, default=1, help="seed of the sequences' order (the subsets' nesting)")
     ap.add_argument("--steps", type=int, default=3000, help="Adam steps of 8 frames per model")
+    ap.add_argument("--hidden", type=int, default=256, help="units of each hidden layer (the shipped width: 256)")
+    ap.add_argument("--layers", type=int, default=3, help="hidden layers (shipped: 3)")
+    ap.add_argument("--drop-joints", default="", help="SMPL joint indices whose pose features are zeroed (comma "
+                    "separated): does a model that cannot see joints far from the garment generalise further?")
+    ap.add_argument("--weight-decay", type=float, default=0.0, help="Adam's L2 weight decay")
+    ap.add_argument("--mirror", action="store_true", help="also fit each count on its sequences and their mirror "
+                    "images (left for right): twice the frames from the same simulations")
     ap.add_argument("--motion", action="store_true", help="also fit models that read the motion")
     ap.add_argument("--threads", type=int, default=2, help="torch threads")
     ap.add_argument("--out", type=Path, default=Path("out/sim_scaling"))
     a = ap.parse_args(argv)
     try:
         counts = sorted({int(c) for c in a.counts.split(",")})
+        dropped = [int(j) for j in a.drop_joints.split(",") if j.strip()]
         seeds = [int(s) for s in a.seeds.split(",")]
     except ValueError:
         ap.error(f"--counts and --seeds take comma-separated integers, got {a.counts!r}, {a.seeds!r}")
-    if min(counts) < 1 or a.steps < 1:
-        ap.error("--counts must be >= 1 and --steps >= 1")
+    if min(counts) < 1 or min(a.steps, a.hidden, a.layers) < 1:
+        ap.error("--counts, --steps, --hidden and --layers must be >= 1")
     for flag, path in (("--work", a.work / "data.json"), ("--work", a.work / "testset.json"),
                        ("--sim-data", a.sim_data / "manifest.json"), ("--test-data", a.test_data / "manifest.json")):
         if not path.is_file():
@@ -176,32 +195,41 @@ def main(argv=None) -> int:
     planned = time.perf_counter() - began
     order = np.random.default_rng(a.order_seed).permutation(len(simulated))
     n = simulated[0].pair.num_vertices
-    kinds = {"pose": False, **({"pose + motion": True} if a.motion else {})}
+    kinds = {"pose": False, **({"pose + motion": True} if a.motion else {}),
+             **({"pose, mirrored too": False} if a.mirror else {})}
     rows = []
     skinning = None
     for kind, motion in kinds.items():
         train = [Clip(simulated[i], body, motion) for i in order]
+        if kind == "pose, mirrored too":  # each sequence followed by its mirror image: a count takes both
+            train = [c for i in order for c in (Clip(simulated[i], body, motion),
+                                                 Clip(mirrored(simulated[i]), body, motion))]
         test = [Clip(c, body, motion) for c in tested]
+        for c in train + test:
+            c.pose[:, :POSE_FEATURES].reshape(-1, POSE_FEATURES // 9, 9)[:, dropped] = 0.0
         if skinning is None:
             skinning = test_mm(None, test)
         extra = train[0].pose.shape[1] - POSE_FEATURES  # the motion features' width (0: none)
 
         def make_net(extra=extra):
-            return MotionNet(n, extra) if extra else GarmentNet(n)
+            width = {"hidden": a.hidden, "layers": a.layers}
+            return MotionNet(n, extra, **width) if extra else GarmentNet(n, **width)
 
         for count in counts:
             for seed in seeds:
                 t = time.perf_counter()
-                net = fit(train[:count], make_net, steps=a.steps, seed=seed)
+                shown = train[:count * (2 if kind == "pose, mirrored too" else 1)]
+                net = fit(shown, make_net, steps=a.steps, seed=seed, weight_decay=a.weight_decay)
                 row = {"inputs": kind, "sequences": count, "seed": seed,
-                       "frames": int(sum(c.source.num_frames - c.first for c in train[:count])),
-                       "test_mm": test_mm(net, test), "train_mm": test_mm(net, train[:count]),
+                       "frames": int(sum(c.source.num_frames - c.first for c in shown)),
+                       "test_mm": test_mm(net, test), "train_mm": test_mm(net, shown),
                        "seconds": time.perf_counter() - t}
                 rows.append(row)
                 print(json.dumps(row), flush=True)
     lines = [f"# Newton's frames and a garment model's error: {a.work.name}", "",
              f"- training: {len(simulated)} simulated sequences in `{a.sim_data.name}`, nested subsets "
-             f"(order seed {a.order_seed}); {a.steps} Adam steps of 8 frames per model; seeds {seeds}; "
+             f"(order seed {a.order_seed}); {a.steps} Adam steps of 8 frames per model; {a.layers} hidden layers of "
+             f"{a.hidden}; weight decay {a.weight_decay:g}; joints' pose zeroed {dropped or 'none'}; seeds {seeds}; "
              f"{n} vertices; shape inputs {SHAPE_FEATURES}",
              f"- test: {len(tested)} sequences of `{a.test_data.name}`, frames after the warm-up; skinning "
              f"{skinning:.2f} mm", f"- planning the sequences took {planned:.0f} s", "",

@@ -182,6 +182,9 @@ def _parser() -> argparse.ArgumentParser:
                     help="garment form, with --sim-data: the coarse model learns Newton's frames (simulation, the "
                          "default) or them Taubin-smoothed (taubin: the paper's coarse tier, the wrinkles left to "
                          "the detail model)")
+    tg.add_argument("--mirror", action="store_true",
+                    help="garment form: train on every training sequence and its mirror image, left for right (a "
+                         "symmetric garment only): twice the frames, Newton's included, from the same simulation")
     tg.add_argument("--sim-sequences", type=int, default=10, metavar="N",
                     help="garment form: the training sequences WORK/hybrid.json has cloth-usd datagen simulate "
                          "(default 10); a larger N keeps those a smaller one drew, so datagen into the same folder "
@@ -578,7 +581,7 @@ def _train_garment(args: argparse.Namespace) -> int:
     plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches,
                           form=args.form, steps=args.steps, detail_steps=args.detail_steps,
                           sim_weight=args.sim_weight, sim_sequences=args.sim_sequences,
-                          coarse_target=args.coarse_target)
+                          coarse_target=args.coarse_target, mirror=args.mirror)
 
     def motion_list(flag: str, path: str | None) -> tuple:
         if not path:

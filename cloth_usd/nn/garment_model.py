@@ -110,7 +110,13 @@ class GarmentModelConfig:
     (``taubin``, coarse tier only: the paper's coarse ground truth, the wrinkles left to the detail
     tier; :attr:`~cloth_usd.nn.data.CoarseTarget.TAUBIN`)."""
 
+    mirror: bool = False
+    """Train on every training sequence and its mirror image, left for right
+    (:mod:`cloth_usd.nn.mirror`; a symmetric garment only): twice the frames, Newton's ones included."""
+
     def __post_init__(self) -> None:
+        if not isinstance(self.mirror, bool):
+            raise ArgumentError(f"garment model mirror must be true or false, got {self.mirror!r}")
         for name in ("hidden", "layers", "steps", "batch", "val_every"):
             value = getattr(self, name)
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
@@ -240,6 +246,20 @@ def _sim_targets(clips: Sequence[_Clip], how: str) -> dict[int, np.ndarray]:
     return out
 
 
+def _mirrored(clips, name: str) -> list:
+    """Each clip mirrored left for right, one map per rest garment (each body wears its own)."""
+    from .mirror import mirror_map, mirrored_clip
+
+    maps: dict[bytes, object] = {}
+    out = []
+    for c in clips:
+        key = np.ascontiguousarray(c.rest_points).tobytes()
+        if key not in maps:
+            maps[key] = mirror_map(c.rest_points, c.pair.faces, name=f"{name}: the garment of {c.name}")
+        out.append(mirrored_clip(c, maps[key]))
+    return out
+
+
 def _first(clip) -> int:
     return min(int(clip.meta.get("warmup_frames", 0)), clip.num_frames - 1)
 
@@ -319,6 +339,8 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
     if len(faces) != 1:
         raise ArgumentError(f"{data_config}: its sequences wear {len(faces)} different garments; a garment model "
                             "learns one (train one bundle per garment)")
+    if config.mirror:
+        train = train + _prepared(_mirrored(data.split("train"), str(data_config)))
     num_vertices = train[0].source.pair.num_vertices
     fixed = None
     record_coarse = None
@@ -397,7 +419,7 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
             "best_val_mm": best[3],
             "val_start_energy": rows[0]["val_start_energy"], "seconds": round(time.perf_counter() - began, 1),
             "data": {"path": str(Path(data_config).resolve()), "config_sha256": data.config_sha256,
-                     "train_sequences": len(train), "val_sequences": len(val)},
+                     "train_sequences": len(train), "val_sequences": len(val), "mirrored": config.mirror},
             "hybrid": None if not simulated else {
                 "simulated_sequences": len({k for k, _ in simulated}), "simulated_frames": len(simulated),
                 "supervised_weight": config.supervised_weight, "supervised_weight_unit": "1/s^2",

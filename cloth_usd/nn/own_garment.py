@@ -113,6 +113,9 @@ class OwnGarmentPlan:
     """The garment form's coarse model, with ``--sim-data``: trained toward Newton's frames
     (``simulation``) or toward them Taubin-smoothed (``taubin``, the paper's coarse ground truth;
     :attr:`~cloth_usd.nn.garment_model.GarmentModelConfig.sim_target`)."""
+    mirror: bool = False
+    """The garment form: train both models on every training sequence and its mirror image, left
+    for right (:attr:`~cloth_usd.nn.garment_model.GarmentModelConfig.mirror`; a symmetric garment)."""
     sim_sequences: int = HYBRID_SEQUENCES
     """The training sequences :data:`HYBRID_CONFIG` has ``cloth-usd datagen`` simulate. A larger
     count keeps the sequences a smaller one drew, so a folder simulated with fewer is extended,
@@ -144,9 +147,10 @@ class OwnGarmentPlan:
         """The garment form's :class:`~cloth_usd.nn.garment_model.GarmentModelConfig` fields per tier:
         the coarse model with the stiffer bending the paper's coarse tier trains with."""
         return {"coarse": {"steps": self.steps, "bending_scale": 10.0, "seed": self.seed,
-                           "supervised_weight": self.sim_weight, "sim_target": self.coarse_target},
+                           "supervised_weight": self.sim_weight, "sim_target": self.coarse_target,
+                           "mirror": self.mirror},
                 "detail": {"steps": self.detail_steps, "bending_scale": 1.0, "seed": self.seed,
-                           "supervised_weight": self.sim_weight}}
+                           "supervised_weight": self.sim_weight, "mirror": self.mirror}}
 
 
 @dataclass(frozen=True)
@@ -226,6 +230,8 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
     categories = sorted({Category(g.category).value for g in garments})
     if sim_data is not None and form != "garment":
         raise ArgumentError("--sim-data: the hybrid objective trains the garment form (one garment) only")
+    if plan.mirror and form != "garment":
+        raise ArgumentError("--mirror: mirrored sequences train the garment form (one garment) only")
     if len(categories) > 1:
         raise ArgumentError(f"train-garment: the garments are of several categories ({', '.join(categories)}); "
                             "a bundle serves one category")

@@ -152,6 +152,32 @@ def test_the_coarse_model_can_learn_newtons_frames_smoothed_as_the_papers_coarse
         GarmentModelConfig(sim_target="smooth")
 
 
+def test_mirror_trains_on_each_sequence_and_its_mirror_image(own, tmp_path):
+    """config.mirror: the training sequences and their mirror images (left for right), the hybrid
+    target mirrored with them; a garment that is not symmetric is refused, naming the config."""
+    import dataclasses
+
+    from cloth_usd.nn.garment_model import GarmentModelConfig, _mirrored, train_garment_model
+
+    root, body, data, *_ = own
+    first = data.split("train")[0]
+    target = np.broadcast_to(first.rest_points, (first.num_frames, *first.rest_points.shape)).astype(np.float32)
+    hybrid = dataclasses.replace(data, clips=tuple(dataclasses.replace(c, target=target) if c is first else c
+                                                   for c in data.clips))
+    cfg = GarmentModelConfig(steps=4, val_every=2, hidden=16, layers=1, mirror=True)
+    info = train_garment_model(root / "data.json", tmp_path / "m", cfg, body=body, physics=hybrid)
+    train = hybrid.split("train")
+    assert info["data"]["mirrored"] is True and info["data"]["train_sequences"] == 2 * len(train)
+    assert info["hybrid"]["simulated_sequences"] == 2  # the simulated sequence and its mirror image
+    image = _mirrored([train[0]], "c")[0]
+    assert image.name.endswith("-mirrored") and image.target.shape == target.shape
+    np.testing.assert_allclose(image.transl, first.transl * [-1.0, 1.0, 1.0])
+    lopsided = dataclasses.replace(first, rest_points=first.rest_points + np.where(
+        first.rest_points[:, :1] > 0.1, [0.0, -0.05, 0.0], 0.0))
+    with pytest.raises(ArgumentError, match=r"^c: the garment of .* is not symmetric left for right"):
+        _mirrored([lopsided], "c")
+
+
 def test_export_writes_a_bundle_bound_to_the_garment_that_animates_it(own, tmp_path):
     from cloth_usd.core.garment_inputs import garment_displacement_inputs
     from cloth_usd.core.heading import heading_frame

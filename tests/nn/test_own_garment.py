@@ -87,6 +87,8 @@ def test_train_garment_refuses_an_existing_bundle_and_a_stage_without_that_garme
     assert "--sim-data" in capsys.readouterr().err and not (tmp_path / "c").exists()
     assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--sim-sequences", "0"]) == 2
     assert "--sim-sequences" in capsys.readouterr().err and not (tmp_path / "c").exists()
+    assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--form", "paper", "--mirror"]) == 2
+    assert "--mirror" in capsys.readouterr().err and not (tmp_path / "c").exists()
     with pytest.raises(SystemExit) as exit_:
         main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--coarse-target", "smooth"])
     assert exit_.value.code == 2 and "--coarse-target" in capsys.readouterr().err and not (tmp_path / "c").exists()
@@ -136,7 +138,7 @@ def test_train_garment_of_the_garment_form_bakes_the_sample(tmp_path, capsys):
 
     out = tmp_path / "own"
     assert main(["train-garment", str(SAMPLE), "-o", str(out), "--steps", "30", "--detail-steps", "10",
-                 "--threads", "1", "--sim-sequences", "12", "--coarse-target", "taubin"]) == 0
+                 "--threads", "1", "--sim-sequences", "12", "--coarse-target", "taubin", "--mirror"]) == 0
     said = capsys.readouterr().out
     assert "coarse step 30" in said and "detail step 10" in said and "3516 vertices" in said
     # the work folder's hybrid config: the training sequences, --sim-sequences of them simulated
@@ -150,6 +152,11 @@ def test_train_garment_of_the_garment_form_bakes_the_sample(tmp_path, capsys):
     # --coarse-target: the coarse model's spring pulls toward Newton's frames smoothed; the detail's, the frames
     tiers = {t: json.loads((tmp_path / "own.work" / f"{t}.json").read_text()) for t in ("coarse", "detail")}
     assert tiers["coarse"]["sim_target"] == "taubin" and tiers["detail"]["sim_target"] == "simulation"
+    # --mirror: both models train on every training sequence and its mirror image (the sample shirt is symmetric)
+    assert tiers["coarse"]["mirror"] is True and tiers["detail"]["mirror"] is True
+    run = json.loads((tmp_path / "own.work" / "coarse" / "run.json").read_text())
+    assert run["data"]["mirrored"] is True and run["data"]["train_sequences"] == 2 * len(
+        [j for j in plan_jobs(training) if j.meta["split"] == "train"])
     bundle = load_bundle(out)
     assert bundle.garment is not None and bundle.garment.vertices == 3516
     timing = json.loads((tmp_path / "own.work" / "timing.json").read_text())

@@ -1,0 +1,108 @@
+"""A simulated sequence mirrored left for right: twice the training frames from one simulation.
+
+A body and its garment mirrored through the body's midplane (x -> -x in the frame the models
+see, the body facing +Z) are another valid sequence: SMPL's left and right joints swap and each
+rotation is mirrored (axis-angle ``(a_x, a_y, a_z) -> (a_x, -a_y, -a_z)``), the root's path is
+mirrored, and a garment that is itself symmetric takes, at each vertex, Newton's garment at that
+vertex's mirror image on its rest surface (barycentric on the nearest triangle). On the sample
+shirt, with Newton's 52 simulated sequences and their mirror images, the garment model's error on
+its Newton test set fell by 0.75 mm on each of two seeds (``bench/bench_sim_scaling.py --mirror``),
+about what a second 52 simulated sequences would give. A garment that is not symmetric (its
+mirror image more than :data:`SYMMETRY_TOLERANCE` from its surface) is refused: mirroring would
+teach it another garment.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+
+import numpy as np
+import trimesh
+from scipy.spatial import cKDTree
+
+from ..errors import ArgumentError
+
+__all__ = ["MIRROR_JOINTS", "SYMMETRY_TOLERANCE", "MirrorMap", "mirror_map", "mirror_poses", "mirrored_clip"]
+
+#: SMPL's 24 joints with left and right swapped.
+MIRROR_JOINTS = (0, 2, 1, 3, 5, 4, 6, 8, 7, 9, 11, 10, 12, 14, 13, 15, 17, 16, 19, 18, 21, 20, 23, 22)
+
+#: Largest distance [m] of a vertex's mirror image from the rest garment's surface for a garment
+#: to count as symmetric (the sample shirt: 0.01 mm at the median vertex, 9 mm at the 99th percentile).
+SYMMETRY_TOLERANCE = 0.02
+
+#: Mirrors a point through the body's midplane (x = 0).
+_FLIP = np.array([-1.0, 1.0, 1.0])
+
+#: Triangles searched per vertex: those around its nearest rest vertices.
+_NEAREST = 8
+
+
+@dataclass(frozen=True)
+class MirrorMap:
+    """Where each vertex's mirror image lies on the rest garment. Shape letters: N vertices."""
+
+    corners: np.ndarray
+    """(N, 3) int64 the vertices of the triangle it lies on."""
+    weights: np.ndarray
+    """(N, 3) float64 its barycentric weights there."""
+    distance: np.ndarray
+    """(N,) float64 its distance from the surface [m] (0 for an exactly symmetric garment)."""
+
+    def apply(self, points: np.ndarray) -> np.ndarray:
+        """(..., N, 3) the mirror image of garments ``points`` (..., N, 3), vertex for vertex."""
+        points = np.asarray(points, dtype=np.float64)
+        return np.einsum("nk,...nkd->...nd", self.weights, points[..., self.corners, :]) * _FLIP
+
+
+def mirror_map(rest_points: np.ndarray, faces: np.ndarray, *, tolerance: float = SYMMETRY_TOLERANCE,
+               name: str = "the garment") -> MirrorMap:
+    """Each vertex's mirror image on the rest garment ``rest_points`` (N, 3) [m] of triangles ``faces``.
+
+    Raises:
+        ArgumentError: a vertex's mirror image is more than ``tolerance`` from the surface (one line
+            naming ``name`` and the distance).
+    """
+    rest = np.asarray(rest_points, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    image = rest * _FLIP
+    _, near = cKDTree(rest).query(image, k=min(_NEAREST, len(rest)))
+    near = np.asarray(near).reshape(len(rest), -1)
+    incident: list[list[int]] = [[] for _ in range(len(rest))]
+    for f, tri in enumerate(faces):
+        for v in tri:
+            incident[v].append(f)
+    tri_of = np.zeros(len(rest), dtype=np.int64)
+    closest = np.zeros_like(rest)
+    for n, q in enumerate(image):
+        cand = np.unique([f for v in near[n] for f in incident[v]]).astype(np.int64)
+        if not len(cand):
+            raise ArgumentError(f"{name}: vertex {n} is on no triangle; it cannot be mirrored")
+        pts = trimesh.triangles.closest_point(rest[faces[cand]], np.repeat(q[None], len(cand), axis=0))
+        best = int(np.argmin(np.linalg.norm(pts - q, axis=1)))
+        tri_of[n], closest[n] = cand[best], pts[best]
+    distance = np.linalg.norm(closest - image, axis=1)
+    worst = int(np.argmax(distance))
+    if distance[worst] > tolerance:
+        raise ArgumentError(f"{name} is not symmetric left for right: vertex {worst}'s mirror image is "
+                            f"{1e3 * distance[worst]:.1f} mm from it (limit {1e3 * tolerance:g} mm); train without "
+                            f"mirroring")
+    weights = trimesh.triangles.points_to_barycentric(rest[faces[tri_of]], closest)
+    return MirrorMap(corners=faces[tri_of], weights=np.asarray(weights, dtype=np.float64), distance=distance)
+
+
+def mirror_poses(poses: np.ndarray) -> np.ndarray:
+    """(T, 72) SMPL axis-angle poses [rad] mirrored left for right."""
+    p = np.asarray(poses, dtype=np.float64).reshape(-1, len(MIRROR_JOINTS), 3)
+    return (p[:, list(MIRROR_JOINTS)] * -_FLIP).reshape(-1, 3 * len(MIRROR_JOINTS))
+
+
+def mirrored_clip(clip, mirror: MirrorMap):
+    """A :class:`~cloth_usd.nn.physics_train.PhysicsClip` mirrored left for right: its poses and
+    root path, and its simulated target (if any) through ``mirror`` (the map of its rest garment)."""
+    target = None
+    if clip.target is not None:
+        target = mirror.apply(clip.target).astype(np.float32)
+    return dataclasses.replace(clip, name=f"{clip.name}-mirrored", poses=mirror_poses(clip.poses),
+                               transl=np.asarray(clip.transl, dtype=np.float64) * _FLIP, target=target)
