@@ -20,9 +20,8 @@ import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
-import trimesh
-from scipy.spatial import cKDTree
 
+from ..core.association import associate
 from ..errors import ArgumentError
 
 __all__ = ["MIRROR_JOINTS", "SYMMETRY_TOLERANCE", "MirrorMap", "mirror_map", "mirror_poses", "mirrored_clip"]
@@ -69,30 +68,14 @@ def mirror_map(rest_points: np.ndarray, faces: np.ndarray, *, tolerance: float =
     """
     rest = np.asarray(rest_points, dtype=np.float64)
     faces = np.asarray(faces, dtype=np.int64)
-    image = rest * _FLIP
-    _, near = cKDTree(rest).query(image, k=min(_NEAREST, len(rest)))
-    near = np.asarray(near).reshape(len(rest), -1)
-    incident: list[list[int]] = [[] for _ in range(len(rest))]
-    for f, tri in enumerate(faces):
-        for v in tri:
-            incident[v].append(f)
-    tri_of = np.zeros(len(rest), dtype=np.int64)
-    closest = np.zeros_like(rest)
-    for n, q in enumerate(image):
-        cand = np.unique([f for v in near[n] for f in incident[v]]).astype(np.int64)
-        if not len(cand):
-            raise ArgumentError(f"{name}: vertex {n} is on no triangle; it cannot be mirrored")
-        pts = trimesh.triangles.closest_point(rest[faces[cand]], np.repeat(q[None], len(cand), axis=0))
-        best = int(np.argmin(np.linalg.norm(pts - q, axis=1)))
-        tri_of[n], closest[n] = cand[best], pts[best]
-    distance = np.linalg.norm(closest - image, axis=1)
-    worst = int(np.argmax(distance))
-    if distance[worst] > tolerance:
+    # each mirror image's nearest point on the rest garment, as a garment is associated with its body
+    found = associate(rest * _FLIP, rest, faces, candidates=_NEAREST)
+    worst = int(np.argmax(found.distance))
+    if not found.distance[worst] <= tolerance:
         raise ArgumentError(f"{name} is not symmetric left for right: vertex {worst}'s mirror image is "
-                            f"{1e3 * distance[worst]:.1f} mm from it (limit {1e3 * tolerance:g} mm); train without "
-                            f"mirroring")
-    weights = trimesh.triangles.points_to_barycentric(rest[faces[tri_of]], closest)
-    return MirrorMap(corners=faces[tri_of], weights=np.asarray(weights, dtype=np.float64), distance=distance)
+                            f"{1e3 * found.distance[worst]:.1f} mm from it (limit {1e3 * tolerance:g} mm); train "
+                            f"without mirroring")
+    return MirrorMap(corners=faces[found.triangle], weights=found.barycentric, distance=found.distance)
 
 
 def mirror_poses(poses: np.ndarray) -> np.ndarray:
