@@ -34,6 +34,9 @@ from cloth_usd.errors import ClothUsdError
 from cloth_usd.nn.garment_model import _first
 from cloth_usd.nn.physics_train import physics_set
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_sim_scaling import add_data_arguments, missing_data  # noqa: E402  (the same inputs, checked alike)
+
 #: Vertex quantiles of a frame's distances reported (1.0: the farthest vertex).
 QUANTILES = (1.0, 0.99, 0.95, 0.9, 0.5)
 
@@ -49,10 +52,7 @@ def frame_offsets(clip, body) -> np.ndarray:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--work", type=Path, required=True, help="a train-garment work folder (data.json, testset.json)")
-    ap.add_argument("--sim-data", type=Path, required=True, help="the datagen folder of WORK/hybrid.json")
-    ap.add_argument("--test-data", type=Path, required=True, help="the Newton test set of WORK/testset.json")
-    ap.add_argument("--mocap", type=Path, help="folder the configs' BVH motions are relative to")
+    add_data_arguments(ap)
     ap.add_argument("--limits", default="0.15,0.5", help="largest-vertex limits [m] to count frames past, "
                     "comma separated")
     ap.add_argument("--out", type=Path, default=Path("out/newton_offsets"))
@@ -61,11 +61,8 @@ def main(argv=None) -> int:
         limits = [float(x) for x in a.limits.split(",")]
     except ValueError:
         ap.error(f"--limits takes comma-separated numbers [m], got {a.limits!r}")
-    for flag, path in (("--work", a.work / "data.json"), ("--work", a.work / "testset.json"),
-                       ("--sim-data", a.sim_data / "manifest.json"), ("--test-data", a.test_data / "manifest.json")):
-        if not path.is_file():
-            print(f"bench_newton_offsets: {flag}: {path} not found", file=sys.stderr)
-            return 2
+    if missing_data(a, "bench_newton_offsets"):
+        return 2
     body = load_body_model()
     median_limit = GuardLimits().median_offset
     lines = ["# Newton's garment against skinning", "",

@@ -139,12 +139,27 @@ def per_doubling(frames: list[int], mm: list[float]) -> float:
     return float(np.polyfit(np.log2(frames), mm, 1)[0])
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def add_data_arguments(ap: argparse.ArgumentParser) -> None:
+    """The inputs of a bench on a train-garment work folder and Newton's frames of its plans."""
     ap.add_argument("--work", type=Path, required=True, help="a train-garment work folder (data.json, testset.json)")
     ap.add_argument("--sim-data", type=Path, required=True, help="the datagen folder of WORK/hybrid.json")
     ap.add_argument("--test-data", type=Path, required=True, help="the Newton test set of WORK/testset.json")
     ap.add_argument("--mocap", type=Path, help="folder the configs' BVH motions are relative to")
+
+
+def missing_data(a: argparse.Namespace, prog: str) -> bool:
+    """Whether an input of :func:`add_data_arguments` is missing (one line naming it, on stderr)."""
+    for flag, path in (("--work", a.work / "data.json"), ("--work", a.work / "testset.json"),
+                       ("--sim-data", a.sim_data / "manifest.json"), ("--test-data", a.test_data / "manifest.json")):
+        if not path.is_file():
+            print(f"{prog}: {flag}: {path} not found", file=sys.stderr)
+            return True
+    return False
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_data_arguments(ap)
     ap.add_argument("--counts", default="2,4,8,16", help="simulated training sequences per model, comma separated")
     ap.add_argument("--seeds", default="0,1", help="seeds per count, comma separated")
     ap.add_argument("--order-seed", type=int, default=1, help="seed of the sequences' order (the subsets' nesting)")
@@ -168,11 +183,8 @@ def main(argv=None) -> int:
         ap.error(f"--counts and --seeds take comma-separated integers, got {a.counts!r}, {a.seeds!r}")
     if min(counts) < 1 or min(a.steps, a.hidden, a.layers) < 1:
         ap.error("--counts, --steps, --hidden and --layers must be >= 1")
-    for flag, path in (("--work", a.work / "data.json"), ("--work", a.work / "testset.json"),
-                       ("--sim-data", a.sim_data / "manifest.json"), ("--test-data", a.test_data / "manifest.json")):
-        if not path.is_file():
-            print(f"bench_sim_scaling: {flag}: {path} not found", file=sys.stderr)
-            return 2
+    if missing_data(a, "bench_sim_scaling"):
+        return 2
     torch.set_num_threads(a.threads)
     body = load_body_model()
     began = time.perf_counter()
