@@ -246,6 +246,15 @@ def _sim_targets(clips: Sequence[_Clip], how: str) -> dict[int, np.ndarray]:
     return out
 
 
+def _trained_poses(poses: np.ndarray, config: dict) -> np.ndarray:
+    """(T', 72) the training motions' poses ``poses`` (T, 72) as a run of ``config`` (its
+    ``run.json`` config) saw them: with their mirror images where it trained mirrored, so the
+    bundle's recorded pose range covers both sides."""
+    from .mirror import mirror_poses
+
+    return np.concatenate([poses, mirror_poses(poses)]) if config.get("mirror") else poses
+
+
 def _mirrored(clips, name: str) -> list:
     """Each clip mirrored left for right, one map per rest garment (each body wears its own)."""
     from .mirror import mirror_map, mirrored_clip
@@ -533,7 +542,7 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
         training = {"manifest_sha256": data.config_sha256,
                     "description": description or f"{c_info['data']['train_sequences']} planned sequences of "
                                                   f"{Path(data_config).name}",
-                    "poses": pose_range_record(train_poses(factory, body)),
+                    "poses": pose_range_record(_trained_poses(train_poses(factory, body), c_info["config"])),
                     "bodies": betas_range_record(train_betas(factory))}
         configs = {"coarse": {"garment_model": c_info["config"], "best_step": c_info["best_step"]}}
         metrics_out = {"export_parity": {f"{t}_max_m": v for t, v in worst.items()},

@@ -92,6 +92,12 @@ def test_train_garment_refuses_an_existing_bundle_and_a_stage_without_that_garme
     with pytest.raises(SystemExit) as exit_:
         main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--coarse-target", "smooth"])
     assert exit_.value.code == 2 and "--coarse-target" in capsys.readouterr().err and not (tmp_path / "c").exists()
+    # the parser writes the garment model's targets out (it imports no torch): they stay the same
+    from cloth_usd.cli import _parser
+    from cloth_usd.nn.garment_model import SIM_TARGETS
+
+    train = _parser()._subparsers._group_actions[0].choices["train-garment"]
+    assert tuple(next(a for a in train._actions if a.dest == "coarse_target").choices) == SIM_TARGETS
 
 
 @pytest.mark.slow
@@ -159,6 +165,16 @@ def test_train_garment_of_the_garment_form_bakes_the_sample(tmp_path, capsys):
         [j for j in plan_jobs(training) if j.meta["split"] == "train"])
     bundle = load_bundle(out)
     assert bundle.garment is not None and bundle.garment.vertices == 3516
+    # the recorded pose range is the range trained on: the motions and their mirror images
+    from cloth_usd.core.limits import pose_range
+    from cloth_usd.datagen.factory import train_poses
+    from cloth_usd.nn.mirror import mirror_poses
+
+    poses = train_poses(training)
+    both = np.concatenate([poses, mirror_poses(poses)])
+    assert bundle.manifest["training_data"]["poses"]["frames"] == len(both)
+    np.testing.assert_allclose(bundle.pose_limits, pose_range(both), atol=np.deg2rad(0.006))
+    assert (pose_range(both)[..., 1] - pose_range(poses)[..., 1]).max() > np.deg2rad(1)  # the images widen it
     timing = json.loads((tmp_path / "own.work" / "timing.json").read_text())
     assert set(timing) == {"plan", "coarse", "detail", "export", "total"}
     assert main(["bake", str(SAMPLE), "-o", str(tmp_path / "c.usdc"), "--tier", "detail", "--models", str(out),
