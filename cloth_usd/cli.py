@@ -178,6 +178,7 @@ def _parser() -> argparse.ArgumentParser:
                          "add the spring toward them (the hybrid objective)")
     tg.add_argument("--sim-weight", type=float, default=1.0e7,
                     help="garment form, with --sim-data: the spring toward Newton's frames [1/s^2] (default 1e7)")
+    # nn.garment_model.SIM_TARGETS, written out: building the parser imports no torch
     tg.add_argument("--coarse-target", choices=("simulation", "taubin"), default="simulation",
                     help="garment form, with --sim-data: the coarse model learns Newton's frames (simulation, the "
                          "default) or them Taubin-smoothed (taubin: the paper's coarse tier, the wrinkles left to "

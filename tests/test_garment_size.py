@@ -5,7 +5,6 @@ from __future__ import annotations
 import shutil
 from pathlib import Path
 
-import numpy as np
 from pxr import Usd, UsdGeom
 
 from cloth_usd.cli import main

@@ -28,7 +28,7 @@ from ..core.fit import FitModel, common_anchors, fit_factor_analysis, pair_dista
 from ..core.scene import Category
 from ..errors import ArgumentError
 from ..core.transfer import transfer_garment
-from .bodies import BodyShape, body_shapes
+from .bodies import body_shapes
 from .dataset import MANIFEST_NAME, DatasetConfig, DatasetError, Job, Manifest, run_jobs
 from .floor import FLOOR_SPLIT, FloorSpec, floor_jobs
 from .mocap import MocapSpec, mocap_motion

@@ -225,8 +225,8 @@ def _sleeves(m: BodyMeasurements, shoulder: np.ndarray, under: np.ndarray, lengt
             panels.append(_panel(f"sleeve_{part}_{side}", e, z, front))
         seams += [Seam((f"sleeve_front_{side}", "top"), (f"sleeve_back_{side}", "top")),
                   Seam((f"sleeve_front_{side}", "under"), (f"sleeve_back_{side}", "under")),
-                  Seam((f"sleeve_front_{side}", "cap"), (f"front", f"armhole_{side}")),
-                  Seam((f"sleeve_back_{side}", "cap"), (f"back", f"armhole_{side}"))]
+                  Seam((f"sleeve_front_{side}", "cap"), ("front", f"armhole_{side}")),
+                  Seam((f"sleeve_back_{side}", "cap"), ("back", f"armhole_{side}"))]
     return panels, seams
 
 

@@ -91,7 +91,7 @@ def measure_body(body: BodyModel, betas: np.ndarray) -> BodyMeasurements:
     """
     v, j = shape_body(body, np.asarray(betas, dtype=np.float64))
     v = np.asarray(v, dtype=np.float64)
-    x, y, z = v[:, 0], v[:, 1], v[:, 2]
+    x, y = v[:, 0], v[:, 1]
     shoulder_jx = float(j[_L_SHOULDER, 0])
     arm_y = float(j[_L_SHOULDER, 1])
 

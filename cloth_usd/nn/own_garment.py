@@ -128,8 +128,10 @@ class OwnGarmentPlan:
             value = getattr(self, name)
             if not isinstance(value, int) or value < 1:
                 raise ArgumentError(f"--{name.replace('_', '-')} must be an integer >= 1, got {value!r}")
-        if self.coarse_target not in ("simulation", "taubin"):
-            raise ArgumentError(f"--coarse-target must be simulation or taubin, got {self.coarse_target!r}")
+        from .garment_model import SIM_TARGETS
+
+        if self.coarse_target not in SIM_TARGETS:
+            raise ArgumentError(f"--coarse-target must be one of {', '.join(SIM_TARGETS)}, got {self.coarse_target!r}")
         if not (isinstance(self.sim_weight, (int, float)) and self.sim_weight > 0):
             raise ArgumentError(f"--sim-weight must be a number > 0 [1/s^2], got {self.sim_weight!r}")
 

@@ -77,7 +77,7 @@ from ..core.pipeline import (CoarseBase, CoarseFeatures, GarmentPair, coarse_bas
 from ..core.postprocess import nearest_vertex
 from ..core.scene import Category, Tier
 from ..errors import ArgumentError, ClothUsdError
-from .data import CoarseTarget, Moments, Split, even_frames, plan_batches
+from .data import CoarseTarget, Moments, Split, plan_batches
 from .physics import GarmentRest, Material, contact_normal_force, friction_energy, garment_energy, garment_rest
 from .train import (CHECKPOINT, CURVE, RUN, RUN_FORMAT, EpochRecord, Objective, TrainConfig, TrainResult, _atomic_text,
                     _coarse_forward, _detail_forward, _record_epoch, _start_epoch, _step, _Tensors, build_model,

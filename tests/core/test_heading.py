@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from cloth_usd.core.body import lbs, load_body_model, shape_body
+from cloth_usd.core.body import lbs, load_body_model
 from cloth_usd.core.heading import Heading, heading_frame, root_yaw, yaw_matrices
 from cloth_usd.core.pipeline import CoarseBase, CoarseFeatures, CoarseForm, prepare_pair, run_tiers
 from cloth_usd.datagen import TShirtParams, make_tshirt, walk_cycle

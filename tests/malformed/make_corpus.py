@@ -27,7 +27,7 @@ from typing import Callable, NamedTuple
 import numpy as np
 from pxr import Sdf, Usd, UsdGeom, UsdSkel, Vt
 
-from cloth_usd.core.smpl import JOINT_NAMES, NUM_JOINTS, PARENTS
+from cloth_usd.core.smpl import NUM_JOINTS, PARENTS
 
 __all__ = ["Case", "build_corpus", "SAMPLE", "SHARED"]
 
@@ -468,7 +468,7 @@ def build_corpus(out_dir: str | Path) -> list[Case]:
         f.mkdir()
         return f
 
-    shared = folder(SHARED)
+    folder(SHARED)
     good = f"{SHARED}/scene.usda"
     shutil.copyfile(SAMPLE, root / good)
 
