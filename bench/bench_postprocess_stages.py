@@ -3,7 +3,9 @@
 For each shot (a stage ``bench/bench_mocap_tiers.py`` wrote, ``OUT/<clip>.usda``: a real clip
 wearing a garment), the detail tier of a bundle is run as a bake runs it, and its garment is
 measured after each step of the post-process: the models' garment, after the strain limiter
-(``--rounds``, each a row; 8 is what a bake runs) and after the push out of the body that follows
+(``--rounds``, each a row, at ``--limit``; a bake runs
+:data:`~cloth_usd.core.postprocess.STRAIN_ITERATIONS` rounds at
+:data:`~cloth_usd.core.postprocess.STRAIN_LIMIT`) and after the push out of the body that follows
 it. Per row, over every ``--every``-th frame:
 
 - edge stretch against the rest garment: the median frame's 99th percentile, the worst frame's,
@@ -19,7 +21,7 @@ it. Per row, over every ``--every``-th frame:
 - wall time of the step per frame.
 
 Run: python bench/bench_postprocess_stages.py --shot OUT/04.usda [--shot ...] [--bundle DIR]
-         [--rounds 4 --rounds 8] [--every 2]
+         [--rounds 8 --rounds 16] [--limit 1.05] [--every 2]
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from cloth_usd.core.association import incident_faces
 from cloth_usd.core.body import load_body_model, posed_vertices
 from cloth_usd.core.features import vertex_normals
 from cloth_usd.core.pipeline import pose_body
-from cloth_usd.core.postprocess import _closest_surface, mesh_edges, push_out_of_surface
+from cloth_usd.core.postprocess import STRAIN_LIMIT, _closest_surface, mesh_edges, push_out_of_surface
 from cloth_usd.datagen.simulate import body_side, edge_ratios
 from cloth_usd.datagen.tshirt import _boundary_vertices
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
@@ -82,6 +84,8 @@ def main(argv=None) -> int:
     ap.add_argument("--shot", action="append", required=True, help="a stage bench_mocap_tiers.py wrote (repeatable)")
     ap.add_argument("--bundle", help="bundle folder (default: the shipped default for the shot's garment)")
     ap.add_argument("--rounds", action="append", type=int, help="strain limiter rounds (repeatable; default 4 and 8)")
+    ap.add_argument("--limit", type=float, default=STRAIN_LIMIT,
+                    help=f"the strain limit: the longest edge over its rest (default {STRAIN_LIMIT}, a bake's)")
     ap.add_argument("--every", type=int, default=2, help="measure every n-th frame (default 2)")
     ap.add_argument("--long", type=float, default=1.5, help="an edge this many times its rest is long (default 1.5)")
     ap.add_argument("--out", default="out/postprocess_stages")
@@ -97,7 +101,8 @@ def main(argv=None) -> int:
             garment.category, worn=(len(garment.rest_points), garment.triangles)).path
         times = np.arange(stage.GetStartTimeCode(), stage.GetEndTimeCode() + 1)[::args.every]
         poses = _stage_poses(shot, times, body)
-        learned = LearnedGarment(load_bundle(bundle_dir), body, poses["betas"], poses["rest"], poses["faces"])
+        learned = LearnedGarment(load_bundle(bundle_dir), body, poses["betas"], poses["rest"], poses["faces"],
+                                 strain_limit=args.limit)
         edges, rest = mesh_edges(poses["faces"]), poses["rest"]
         inner, ring = inner_triangles(np.asarray(poses["faces"], dtype=np.int64), len(rest))
         model_poses, model_transl = poses["model_poses"], poses["model_transl"]
@@ -140,11 +145,12 @@ def main(argv=None) -> int:
             start = time.perf_counter()
             limited = learned.limiter(raw)
             limit_ms = 1e3 * (time.perf_counter() - start) / len(times)
-            row(f"limited x{rounds}", limited, limit_ms)
+            row(f"limited to {args.limit:g} x{rounds}", limited, limit_ms)
             start = time.perf_counter()
             pushed = push_out_of_surface(limited, posed.patch_points, posed.patch_normals, patch.faces, patch.contact,
                                          margin=learned.margin, rings=patch.rings)[0]
-            row(f"limited x{rounds}, pushed", pushed, limit_ms + 1e3 * (time.perf_counter() - start) / len(times),
+            push_ms = 1e3 * (time.perf_counter() - start) / len(times)
+            row(f"limited to {args.limit:g} x{rounds}, pushed", pushed, limit_ms + push_ms,
                 before=limited)
     (out / "postprocess_stages.json").write_text(json.dumps(rows, indent=1))
     lines = ["| shot | stage | ms/frame | stretch p99 median / worst, max | frames with an edge > "

@@ -176,8 +176,8 @@ def _parser() -> argparse.ArgumentParser:
                     help="garment form: Newton's frames of some training sequences (cloth-usd datagen "
                          "WORK/hybrid.json -o DIR, after a first train-garment wrote the work folder): their batches "
                          "add the spring toward them (the hybrid objective)")
-    tg.add_argument("--sim-weight", type=float, default=1.0e7,
-                    help="garment form, with --sim-data: the spring toward Newton's frames [1/s^2] (default 1e7)")
+    tg.add_argument("--sim-weight", type=float, default=3.0e7,
+                    help="garment form, with --sim-data: the spring toward Newton's frames [1/s^2] (default 3e7)")
     # nn.garment_model.SIM_TARGETS, written out: building the parser imports no torch
     tg.add_argument("--coarse-target", choices=("simulation", "taubin"), default="simulation",
                     help="garment form, with --sim-data: the coarse model learns Newton's frames (simulation, the "

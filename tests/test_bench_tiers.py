@@ -131,3 +131,23 @@ def test_another_categorys_bundle_needs_a_garment_of_its_category(bundle_and_dat
     assert err == (f"bench_tiers: --bundle {dress} is a dress bundle and the made garment a T-shirt; pass --garment "
                    "STAGE.usda with a dress")
     assert not (tmp_path / "out").exists()
+
+
+def test_bench_strain_limit_measures_each_setting_against_the_simulation(bundle_and_data, tmp_path, capsys):
+    """bench/bench_strain_limit.py: the detail tier's error per strain-limit setting, side by side; a
+    tighter limit moves the garment, and a malformed setting is one line naming it."""
+    from cloth_usd.errors import ArgumentError
+
+    bench = _module("bench_strain_limit", ROOT / "bench" / "bench_strain_limit.py")
+    bundle, data = bundle_and_data
+    assert bench.main(["--data", str(data), "--bundle", str(bundle), "--setting", "1.10/8", "--setting",
+                       "1.01/16/1e-2", "--setting", "none", "--out", str(tmp_path / "out")]) == 0
+    table = capsys.readouterr().out
+    assert "| 1.10/8 |" in table and "| 1.01/16/1e-2 |" in table and "| none |" in table
+    rows = json.loads((tmp_path / "out" / "strain_limit.json").read_text())["rows"]
+    assert [r["setting"] for r in rows] == ["1.10/8", "1.01/16/1e-2", "none"]
+    assert all(np.isfinite(r["mm"]["all"]) and r["mm"]["all"] > 0 for r in rows)
+    assert rows[0]["mm"]["all"] != rows[2]["mm"]["all"]  # the limiter moved the garment
+    assert bench.parse_setting("1.05/16") == (1.05, 16, bench.STRAIN_ANCHOR) and bench.parse_setting("none") is None
+    with pytest.raises(ArgumentError, match="1.05x16"):
+        bench.parse_setting("1.05x16")

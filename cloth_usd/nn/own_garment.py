@@ -106,7 +106,7 @@ class OwnGarmentPlan:
     """The garment form's coarse model: Adam steps of 8 frames."""
     detail_steps: int = 1500
     """The garment form's detail model: Adam steps of 8 frames."""
-    sim_weight: float = 1.0e7
+    sim_weight: float = 3.0e7
     """The garment form's hybrid objective (``--sim-data``): the spring toward Newton's frames
     [1/s^2] (:attr:`~cloth_usd.nn.garment_model.GarmentModelConfig.supervised_weight`)."""
     coarse_target: str = "simulation"

@@ -100,8 +100,14 @@ class LearnedGarment:
     def limiter(self) -> StrainLimiter | None:
         """The detail tier's strain limiter (None: none), factored when the detail tier first
         runs: a coarse bake never builds it."""
-        rest, faces, limit = self._limit
-        return StrainLimiter(rest, faces, limit=limit) if limit is not None else None
+        limit = self._limit[2]
+        return self.strain_limiter(limit=limit) if limit is not None else None
+
+    def strain_limiter(self, **settings) -> StrainLimiter:
+        """A :class:`~cloth_usd.core.postprocess.StrainLimiter` of this garment's rest (``settings``:
+        its ``limit``, ``iterations`` and ``anchor``; the defaults where not given)."""
+        rest, faces, _ = self._limit
+        return StrainLimiter(rest, faces, **settings)
 
     @property
     def num_vertices(self) -> int:
