@@ -260,18 +260,18 @@ def _closest_surface(q: np.ndarray, offset: np.ndarray, near: np.ndarray, found:
 #: The longest an edge may be after the post-process, over its rest length: Newton's shirts
 #: keep 99% of their edges within 1.09 of rest on real clips (their longest at 1.25), where a
 #: learned garment stretches its armpits and shoulders as skinning does (1.2-1.4). On the sample
-#: shirt's Newton test set (``sample-tshirt-own``'s detail tier, 16 rounds) limits of 1.10, 1.07,
-#: 1.05, 1.03, 1.02 and 1.01 measured 15.07, 14.77, 14.59, 14.47, 14.47 and 14.52 mm; 1.03 let more
-#: specks of skin through a taut shoulder in a close-up than 1.05.
+#: shirt's Newton test set (``sample-tshirt-own``'s detail tier, 16 rounds;
+#: ``bench/bench_strain_limit.py``) limits of 1.10, 1.07, 1.05, 1.03 and 1.02 measured 13.88, 13.62,
+#: 13.47, 13.37 and 13.38 mm; 1.03 let more specks of skin through a taut shoulder in a close-up.
 STRAIN_LIMIT = 1.05
 #: Rounds of :class:`StrainLimiter` (each a local step over the edges and one sparse solve): on the
-#: same test set at the limit 1.05, 8, 12, 16 and 32 rounds measured 14.80, 14.67, 14.59 and 14.48 mm
-#: (1.10: 8 rounds 15.12, 16 rounds 15.07). Each round costs about half a millisecond a frame on a
+#: same test set at the limit 1.05, 8, 12, 16 and 32 rounds measured 13.66, 13.54, 13.47 and 13.38 mm
+#: (1.10: 8 rounds 13.92, 16 rounds 13.88). Each round costs about half a millisecond a frame on a
 #: 4000-vertex shirt.
 STRAIN_ITERATIONS = 16
 #: How strongly :class:`StrainLimiter` holds each vertex where the models put it, against an
-#: edge's pull (1: as strongly as one edge). On the same test set (limit 1.03, 16 rounds) 1e-2,
-#: 1e-4 and 1e-5 measured 14.84, 15.60 and 15.96 mm, where 1e-3 measured 14.47.
+#: edge's pull (1: as strongly as one edge). On the same test set (limit 1.03, 16 rounds) 1e-2 and
+#: 1e-4 measured 13.66 and 14.43 mm, where 1e-3 measured 13.37.
 STRAIN_ANCHOR = 1.0e-3
 
 
