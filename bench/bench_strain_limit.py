@@ -24,15 +24,13 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_usd.core.pipeline import pose_body
-from cloth_usd.core.postprocess import STRAIN_ANCHOR, push_out_of_surface
+from cloth_usd.core.body import load_body_model
+from cloth_usd.core.pipeline import pose_body, post_process
+from cloth_usd.core.postprocess import STRAIN_ANCHOR
 from cloth_usd.errors import ArgumentError
-from cloth_usd.evaluate import garment_reads, learned_garment
+from cloth_usd.evaluate import _SPLIT_TITLES, garment_reads, learned_garment
 from cloth_usd.nn.data import load_dataset
 from cloth_usd.runtime.bundle import load_bundle
-
-#: ``cloth-usd evaluate``'s split of a test set, by the start of a sequence's name.
-SPLITS = {"unseen bodies": "test_body", "unseen motions": "test_motion"}
 
 
 def parse_setting(text: str) -> tuple[float, int, float] | None:
@@ -59,32 +57,26 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="out/strain_limit")
     args = ap.parse_args(argv)
     settings = [(s, parse_setting(s)) for s in args.setting]
-    from cloth_usd.core.body import load_body_model
-
     body = load_body_model()
     data = load_dataset(args.data, body=body)
     bundle = load_bundle(args.bundle)
     reads = garment_reads(bundle, data.clips)
-    errors = {name: {split: [] for split in SPLITS} for name, _ in settings}
+    errors = {name: {title: [] for title in _SPLIT_TITLES.values()} for name, _ in settings}
     seconds = {name: 0.0 for name, _ in settings}
     frames = 0
     for clip in data.clips:
-        split = next((s for s, prefix in SPLITS.items() if clip.name.startswith(prefix)), None)
+        split = _SPLIT_TITLES.get(clip.split.value)  # the test splits, as cloth-usd evaluate titles them
         if split is None:
             continue
         learned = learned_garment(bundle, body, clip, reads)
         raw = learned.evaluate("detail", clip.poses, clip.transl, postprocess=False).points
         posed = pose_body(body, learned.pair, clip.poses, clip.transl)
-        patch = learned.pair.patch
         frames += len(raw)
         for name, setting in settings:
+            limiter = None if setting is None else learned.strain_limiter(
+                limit=setting[0], iterations=setting[1], anchor=setting[2])  # factored once a garment, as a bake does
             start = time.perf_counter()
-            x = raw
-            if setting is not None:
-                limit, rounds, anchor = setting
-                x = learned.strain_limiter(limit=limit, iterations=rounds, anchor=anchor)(raw)
-            x = push_out_of_surface(x, posed.patch_points, posed.patch_normals, patch.faces, patch.contact,
-                                    margin=learned.margin, rings=patch.rings)[0]
+            x = post_process(learned.pair, posed, raw, margin=learned.margin, limiter=limiter)[0]
             seconds[name] += time.perf_counter() - start
             errors[name][split].append(np.linalg.norm(x - clip.positions, axis=2).mean(axis=1))
         print(f"{clip.name}: " + ", ".join(f"{name} {1e3 * errors[name][split][-1].mean():.2f} mm"

@@ -48,7 +48,7 @@ from .smpl import JOINT_NAMES
 __all__ = ["GarmentPair", "BodyPatch", "body_patch", "body_under", "swinging_parts", "SWINGING_JOINTS", "CONTACT_REACH",
            "PosedBody", "prepare_pair", "pose_body", "coarse_model_features", "detail_model_inputs", "run_tiers", "CoarseFn", "DetailFn",
            "CoarseBase", "coarse_base_points", "CoarseFeatures", "coarse_feature_count", "CoarseForm",
-           "contact_trees", "run_garment_model", "GarmentFn"]
+           "contact_trees", "run_garment_model", "GarmentFn", "post_process"]
 
 #: A coarse model: ``(features (B, N, F), graph) -> delta (B, N, 3) [m]`` (F: :func:`coarse_feature_count`).
 CoarseFn = Callable[[np.ndarray, MeshGraph], np.ndarray]
@@ -358,6 +358,21 @@ def coarse_base_points(body: BodyModel, pair: GarmentPair, posed: PosedBody, pos
     return skin_garment(pair.binding, poses, transl, body.parents)
 
 
+def post_process(pair: GarmentPair, posed: PosedBody, points: np.ndarray, *, margin: float = DEFAULT_MARGIN,
+                 limiter: StrainLimiter | None = None, trees: list | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """The post-process of a batch of the models' garment ``points`` (T, N, 3) [m]: the strain
+    ``limiter`` first (None: none), then the push out of the posed body under the garment
+    (:func:`~cloth_usd.core.postprocess.push_out_of_surface`, ``margin`` [m] in front of it;
+    ``trees``: :func:`contact_trees` of ``posed`` when the caller built them already).
+
+    Returns:
+        ``(points (T, N, 3) float64 [m], moved (T,) int64)``.
+    """
+    m = limiter(points) if limiter is not None else points
+    return push_out_of_surface(m, posed.patch_points, posed.patch_normals, pair.patch.faces, pair.patch.contact,
+                               margin=margin, rings=pair.patch.rings, trees=trees)
+
+
 #: A garment's own model: (T, 72) poses in the canonical heading -> (T, N, 3) displacement of
 #: the unposed garment [m] (:mod:`cloth_usd.core.garment_inputs`).
 GarmentFn = Callable[[np.ndarray], np.ndarray]
@@ -393,11 +408,8 @@ def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, tra
                                 f"({hi - lo}, {n}, 3)")
         m = skin_displaced(pair.binding, poses[lo:hi], transl[lo:hi], body.parents, d)
         if postprocess:
-            m = limiter(m) if limiter is not None else m
             posed = pose_body(body, pair, poses[lo:hi], transl[lo:hi])
-            points[lo:hi], moved[lo:hi] = push_out_of_surface(m, posed.patch_points, posed.patch_normals,
-                                                              pair.patch.faces, pair.patch.contact, margin=margin,
-                                                              rings=pair.patch.rings)
+            points[lo:hi], moved[lo:hi] = post_process(pair, posed, m, margin=margin, limiter=limiter)
         else:
             points[lo:hi] = m
     return points, moved
@@ -462,10 +474,7 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
             feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])
             m = m + detail(feats, attrs, pair.graph)
         if postprocess:
-            m = limiter(m) if limiter is not None else m
-            points[lo:hi], moved[lo:hi] = push_out_of_surface(m, posed.patch_points, posed.patch_normals,
-                                                              pair.patch.faces, pair.patch.contact, margin=margin,
-                                                              rings=pair.patch.rings, trees=trees)
+            points[lo:hi], moved[lo:hi] = post_process(pair, posed, m, margin=margin, limiter=limiter, trees=trees)
         else:
             points[lo:hi] = m
     return (points if frame is None else frame.to_world(points)), moved
