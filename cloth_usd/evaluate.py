@@ -428,12 +428,12 @@ def _plot(stats: dict, order: list[str], titles: dict, tiers: list[str], out: Pa
     axes = np.atleast_1d(fig.subplots(nrows, cols, squeeze=False)).ravel()
     for ax, key in zip(axes, order):
         top = max(s.quantile(0.99) for s in stats[key].values() if s.count)
-        top = max(top, 10 * HIST_BIN_MM)
+        top = min(max(top, 10 * HIST_BIN_MM), HIST_MAX_MM)  # errors past the histogram's end are not drawn
         for i, tier in enumerate(tiers):
             s = stats[key][tier]
             if not s.count:
                 continue
-            k = int(math.ceil(top / HIST_BIN_MM))
+            k = min(int(math.ceil(top / HIST_BIN_MM)), s.counts.shape[0])
             edges = np.arange(k + 1) * HIST_BIN_MM
             ax.stairs(s.counts[:k] / s.count, edges, label=f"{tier} ({s.mean:.2f} mm)", color=f"C{i}")
         ax.set_title(titles[key], fontsize=10)

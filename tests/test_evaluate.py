@@ -34,6 +34,18 @@ def test_error_stats_bins_and_quantiles():
     assert np.isnan(ErrorStats().mean)
 
 
+def test_histogram_plot_with_most_errors_past_its_end(tmp_path):
+    """A garment far from Newton (a skirt that swings 10 cm away) puts the 99th percentile past the
+    histogram's end; the plot draws up to that end (it raised a size mismatch before)."""
+    from cloth_usd.evaluate import HIST_MAX_MM, _plot
+
+    far, near = ErrorStats(), ErrorStats()
+    far.add(np.linspace(0.0, 3 * HIST_MAX_MM, 1000))
+    near.add(np.linspace(0.0, 20.0, 1000))
+    _plot({"all": {"skinning": far, "detail": near}}, ["all"], {"all": "all"}, ["skinning", "detail"], tmp_path)
+    assert (tmp_path / "histograms.png").stat().st_size > 0 and (tmp_path / "means.png").stat().st_size > 0
+
+
 def test_labels_come_from_metadata_or_body_and_hem():
     assert body_label({"body": "medium_fat"}) == "fat"
     assert body_label({"body": "slim"}) == "slim"
