@@ -60,6 +60,8 @@ class ErrorStats:
     """Histogram counts of ``[k * 0.15, (k + 1) * 0.15)`` mm."""
     overflow: int = 0
     """Errors of :data:`HIST_MAX_MM` or more."""
+    tail: list = field(default_factory=list)
+    """Those errors themselves (arrays [mm]), for the quantiles past the histogram's end."""
 
     def add(self, errors_mm: np.ndarray) -> None:
         e = np.asarray(errors_mm, dtype=np.float64).ravel()
@@ -70,18 +72,25 @@ class ErrorStats:
         inside = k < self.counts.shape[0]
         self.counts += np.bincount(k[inside], minlength=self.counts.shape[0])
         self.overflow += int((~inside).sum())
+        if not inside.all():
+            self.tail.append(e[~inside])
 
     @property
     def mean(self) -> float:
         return self.total / self.count if self.count else math.nan
 
     def quantile(self, q: float) -> float:
-        """The ``q`` quantile [mm], to the histogram's resolution (bin centre); NaN when empty."""
+        """The ``q`` quantile [mm], to the histogram's resolution (bin centre), or exact past its
+        end (:data:`HIST_MAX_MM`); NaN when empty."""
         if not self.count:
             return math.nan
         cum = np.cumsum(self.counts)
         k = int(np.searchsorted(cum, q * self.count, side="left"))
-        return (k + 0.5) * HIST_BIN_MM if k < self.counts.shape[0] else self.maximum
+        if k < self.counts.shape[0]:
+            return (k + 0.5) * HIST_BIN_MM
+        tail = np.sort(np.concatenate(self.tail))
+        rank = int(math.ceil(q * self.count - cum[-1])) - 1
+        return float(tail[min(max(rank, 0), tail.size - 1)])
 
 
 def body_label(meta: dict) -> str:

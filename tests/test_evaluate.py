@@ -32,6 +32,11 @@ def test_error_stats_bins_and_quantiles():
     assert list(s.counts[:3]) == [2, 1, 1]
     assert s.quantile(0.5) == pytest.approx(1.5 * HIST_BIN_MM)
     assert np.isnan(ErrorStats().mean)
+    far = ErrorStats()  # quantiles past the histogram's end are the errors themselves, not the largest one
+    far.add(np.r_[np.zeros(10), np.arange(200.0, 1000.0, 10.0)])
+    assert far.quantile(0.5) == pytest.approx(np.quantile(np.r_[np.zeros(10), np.arange(200.0, 1000.0, 10.0)], 0.5,
+                                                          method="inverted_cdf"))
+    assert far.quantile(1.0) == 990.0 and far.quantile(0.1) == pytest.approx(0.5 * HIST_BIN_MM)
 
 
 def test_histogram_plot_with_most_errors_past_its_end(tmp_path):
