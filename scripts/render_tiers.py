@@ -4,7 +4,7 @@
         LABEL=CACHE.usdc [LABEL=CACHE.usdc ...] [--full] [--yaw=DEG]  # after bash scripts/test_addon.sh
         # --full: the whole figure (a dress, trousers); --yaw: the camera turned about the
         # up axis with a character that faces away from +Z
-    .venv-blender/bin/python scripts/render_tiers.py --frame-file FRAME.npz OUT.png
+    .venv-blender/bin/python scripts/render_tiers.py --frame-file FRAME.npz OUT.png [--full]
         # FRAME.npz from scripts/testset_frame.py: a test-set frame, Newton's panel included
 
 Each cache is a cloth_usd point cache of the scene's garment; the body is computed by
@@ -129,15 +129,16 @@ def _render_panels(body_verts: np.ndarray, body_faces: np.ndarray, faces: np.nda
 
 
 def main(argv: list[str]) -> None:
-    if len(argv) == 3 and argv[0] == "--frame-file":
-        data = np.load(argv[1])
+    full = "--full" in argv
+    if argv and argv[0] == "--frame-file" and len([a for a in argv if a != "--full"]) == 3:
+        frame_file, out = (a for a in argv[1:] if a != "--full")
+        data = np.load(frame_file)
         panels = [(str(label), pts) for label, pts in zip(data["labels"], data["points"])]
-        _render_panels(data["body_vertices"], data["body_faces"], data["garment_faces"], panels, Path(argv[2]),
-                       forward=data["forward"])
-        print(f"wrote {argv[2]} ({', '.join(label for label, _ in panels)}; {data['sequence']}, "
+        _render_panels(data["body_vertices"], data["body_faces"], data["garment_faces"], panels, Path(out),
+                       forward=data["forward"], full=full)
+        print(f"wrote {out} ({', '.join(label for label, _ in panels)}; {data['sequence']}, "
               f"frame {int(data['frame'])})")
         return
-    full = "--full" in argv
     yaw = next((float(a.split("=", 1)[1]) for a in argv if a.startswith("--yaw=")), 0.0)
     argv = [a for a in argv if a != "--full" and not a.startswith("--yaw=")]
     if len(argv) < 4:
