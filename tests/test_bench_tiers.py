@@ -151,3 +151,23 @@ def test_bench_strain_limit_measures_each_setting_against_the_simulation(bundle_
     assert bench.parse_setting("1.05/16") == (1.05, 16, bench.STRAIN_ANCHOR) and bench.parse_setting("none") is None
     with pytest.raises(ArgumentError, match="1.05x16"):
         bench.parse_setting("1.05x16")
+
+
+def test_bench_newton_cloth_measures_newton_and_each_tier(bundle_and_data, tmp_path, capsys):
+    """bench/bench_newton_cloth.py: Newton's own frames (zero error to themselves), skinning and the
+    bundle's tiers, with each frame's stretch (median and worst frame) and the share inside the body."""
+    pytest.importorskip("torch", reason="the energies are the physics objective's (torch)")
+    bench = _module("bench_newton_cloth", ROOT / "bench" / "bench_newton_cloth.py")
+    bundle, data = bundle_and_data
+    assert bench.main(["--data", str(data), "--bundle", str(bundle), "--out", str(tmp_path / "out")]) == 0
+    assert "| Newton |" in capsys.readouterr().out
+    table = json.loads((tmp_path / "out" / "newton_cloth.json").read_text())
+    assert {"Newton", "skinning", "linear-tshirt coarse", "linear-tshirt detail"} <= set(table)
+    assert table["Newton"]["mm_after"] == 0.0 and table["skinning"]["mm_after"] > 0
+    for row in table.values():
+        assert 0.0 < row["p99_stretch"] <= row["p99_stretch_worst"] <= row["max_stretch_worst"]
+        assert row["max_stretch"] <= row["max_stretch_worst"] and 0 <= row["frames_past_1p5"] <= row["frames_measured"]
+        assert 0.0 <= row["inside_1mm_pct"] <= row["inside_pct"] <= 100.0
+        after = row["after"]
+        assert 0.0 < after["p99_stretch"] <= after["p99_stretch_worst"] <= after["max_stretch_worst"]
+    assert table["Newton"]["after"]["max_stretch_worst"] == table["Newton"]["max_stretch_worst"]

@@ -103,9 +103,11 @@ def test_the_fine_tune_configs_start_from_the_gpu_runs():
 
 
 def test_the_own_garment_motion_lists_hold_out_the_test_clips():
-    """train-garment's motion lists: real clips only, none of the test set's; the 24-clip list is
-    tshirt-v6's training clips."""
-    test = {m["bvh"] for m in json.loads((CONFIGS / "own_garment_test_motions.json").read_text())}
+    """train-garment's motion lists: real clips only, none of the test sets' (the three clips and the
+    dance and martial-arts pair); the 24-clip list is tshirt-v6's training clips."""
+    test = {m["bvh"] for name in ("own_garment_test_motions.json", "own_garment_test_motions_dance.json")
+            for m in json.loads((CONFIGS / name).read_text())}
+    assert len(test) == 5
     v6 = [m for m in json.loads((CONFIGS / "physics_tshirt_mocap.json").read_text())["train_motions"] if "bvh" in m]
     for name in ("own_garment_motions.json", "own_garment_motions_v6.json"):
         motions = json.loads((CONFIGS / name).read_text())
