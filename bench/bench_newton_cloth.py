@@ -17,7 +17,8 @@ before the drape, a row "skinning, authored" skins that one as well:
   post-process, and deeper than 1 mm in it.
 
 Newton's own rows say what the simulator itself does on the same frames: where the body's parts
-overlap (an arm pressed into the chest in a dance) its cloth stretches and sinks in too.
+overlap (an elbow against the chest in a dance, a knee raised into the hem) its cloth stretches
+and sinks in too.
 
 Energies, stretch and inside are taken on every fifth frame. Writes ``OUT/newton_cloth.md``
 (also printed) and ``OUT/newton_cloth.json``. Needs torch (the energies).
