@@ -328,6 +328,14 @@ def _datagen(args: argparse.Namespace) -> int:
                            batch=args.batch, penetration_frames=args.penetration_frames, deadline=deadline)
     sys.stdout.write(f"{len(manifest.accepted)} sequences simulated, {len(manifest.rejected)} rejected "
                      f"as unstable; manifest in {args.output}/manifest.json\n")
+    if manifest.rejected and not manifest.accepted:  # not a data set: nothing to train on or measure against
+        from .datagen.simulate import SimulationError
+
+        first = manifest.rejected[0]
+        failure = (manifest.sequences[first].get("quality") or {}).get("failure") or "unstable"
+        raise SimulationError(f"{args.config}: every sequence was rejected as unstable ({first}: {failure}); where "
+                              "a hand, an elbow or a raised knee presses into the cloth Newton's own cloth can stretch "
+                              "past the config's sim.max_stretch (1.6 unless set): raise it there to keep them")
     return 0
 
 

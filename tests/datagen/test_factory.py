@@ -186,3 +186,27 @@ def test_simulate_sequences_draws_part_of_the_plan(tmp_path, monkeypatch):
     for bad in (5, {"train": 0}, {"train": 2.5}, {"train": True}, {"trian": 5}):
         with pytest.raises(ArgumentError, match="simulate_sequences"):
             plan_jobs(FactoryConfig(**{**TINY, "simulate_sequences": bad}))
+
+
+def test_datagen_fails_when_every_sequence_is_rejected(tmp_path, monkeypatch, capsys):
+    """A run whose every sequence went unstable made no data set: exit 2, one line naming the config,
+    the first sequence's failure and the setting that decides it (the manifest stays, as the record)."""
+    from cloth_usd.core.shards import Manifest
+    from cloth_usd.datagen import factory
+
+    config_path = tmp_path / "tiny.json"
+    config_path.write_text(json.dumps(TINY))
+    rejected = {f"job{k}": {"status": "rejected", "shard": None, "seed": k,
+                            "quality": {"stable": False, "failure": f"frame {59 + k}: edge stretch 2.26 > 1.6"}}
+                for k in range(2)}
+
+    def all_rejected(config, out_dir, **kwargs):
+        return Manifest(config={}, dataset={}, engine={}, sequences=rejected)
+
+    monkeypatch.setattr(factory, "run_factory", all_rejected)
+    assert main(["datagen", str(config_path), "-o", str(tmp_path / "d")]) == 2
+    captured = capsys.readouterr()
+    assert "0 sequences simulated, 2 rejected" in captured.out
+    line = captured.err.strip()
+    assert "\n" not in line and "tiny.json: every sequence was rejected" in line
+    assert "job0: frame 59: edge stretch 2.26 > 1.6" in line and "sim.max_stretch" in line
