@@ -38,7 +38,7 @@ import torch
 
 from cloth_usd.core.body import posed_vertices
 from cloth_usd.core.skinning import skin_garment
-from cloth_usd.datagen.simulate import body_side, unique_edges
+from cloth_usd.datagen.simulate import body_side, edge_ratios, unique_edges
 from cloth_usd.nn.data import load_dataset
 from cloth_usd.nn.physics import Material, bending_energy, garment_rest, membrane_energy
 from cloth_usd.runtime.bundle import load_bundle
@@ -47,22 +47,28 @@ from cloth_usd.evaluate import garment_reads, learned_garment
 STEP = 5
 
 
-def _measure(acc: dict, clip, body, rest, edges, rest_len, after, before, truth) -> None:
+def _stretch(x: np.ndarray, rest_points: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each frame's 99th percentile and largest edge length over its rest length."""
+    st = edge_ratios(x, rest_points, edges)
+    return np.percentile(st, 99, axis=1), st.max(1)
+
+
+def _measure(acc: dict, rest, rest_points, edges, body_faces, bodies, after, before, truth) -> None:
+    """One tier's rows of one sequence; ``bodies``: the posed body at every ``STEP``-th frame."""
     every = before[::STEP]
     acc.setdefault("after", []).append(np.linalg.norm(after - truth, axis=-1).mean(1))
     acc.setdefault("before", []).append(np.linalg.norm(before - truth, axis=-1).mean(1))
     x = torch.as_tensor(every)
     acc.setdefault("membrane", []).append(membrane_energy(x, rest, Material()).numpy())
     acc.setdefault("bending", []).append(bending_energy(x, rest, Material()).numpy())
-    st = np.linalg.norm(every[:, edges[:, 1]] - every[:, edges[:, 0]], axis=-1) / rest_len
-    acc.setdefault("p99", []).append(np.percentile(st, 99, axis=1))
-    acc.setdefault("max", []).append(st.max(1))
-    done = after[::STEP]  # what a bake delivers
-    st = np.linalg.norm(done[:, edges[:, 1]] - done[:, edges[:, 0]], axis=-1) / rest_len
-    acc.setdefault("p99_after", []).append(np.percentile(st, 99, axis=1))
-    acc.setdefault("max_after", []).append(st.max(1))
-    bodyv = posed_vertices(body, clip.pair.betas, clip.poses[::STEP], clip.transl[::STEP])
-    side = np.stack([body_side(every[k], bodyv[k], body.faces) for k in range(len(bodyv))])
+    p99, longest = _stretch(every, rest_points, edges)
+    acc.setdefault("p99", []).append(p99)
+    acc.setdefault("max", []).append(longest)
+    if after is not before:  # what a bake delivers (Newton's and skinning's rows have no post-process)
+        p99, longest = _stretch(after[::STEP], rest_points, edges)
+    acc.setdefault("p99_after", []).append(p99)
+    acc.setdefault("max_after", []).append(longest)
+    side = np.stack([body_side(every[k], bodies[k], body_faces) for k in range(len(bodies))])
     acc.setdefault("inside", []).append(np.mean(side < 0, axis=1))
     acc.setdefault("inside_1mm", []).append(np.mean(side < -1e-3, axis=1))
 
@@ -84,7 +90,7 @@ def main(argv: list[str] | None = None) -> int:
     for clip in clips:
         rest = garment_rest(clip.rest_points, clip.pair.faces, Material(), dtype=torch.float64)
         edges = unique_edges(clip.pair.faces)
-        rest_len = np.linalg.norm(clip.rest_points[edges[:, 1]] - clip.rest_points[edges[:, 0]], axis=-1)
+        bodies = posed_vertices(body, clip.pair.betas, clip.poses[::STEP], clip.transl[::STEP])  # once, every tier
         truth = clip.positions.astype(np.float64)
         skinned = skin_garment(clip.pair.binding, clip.poses, clip.transl, body.parents)
         outs = {"Newton": (truth, truth), "skinning": (skinned, skinned)}
@@ -100,8 +106,8 @@ def main(argv: list[str] | None = None) -> int:
                                             learned.evaluate(tier, clip.poses, clip.transl, skinned=skinned,
                                                              postprocess=False).points)
         for label, (after, before) in outs.items():
-            _measure(rows.setdefault(label, {"sequences": set()}), clip, body, rest, edges, rest_len, after, before,
-                     truth)
+            _measure(rows.setdefault(label, {"sequences": set()}), rest, clip.rest_points, edges, body.faces, bodies,
+                     after, before, truth)
             rows[label]["sequences"].add(clip.name)
         print(f"{clip.name}: " + ", ".join(f"{k} {1000 * np.linalg.norm(a - truth, axis=-1).mean():.2f} mm"
                                            for k, (a, _) in outs.items()), flush=True)
