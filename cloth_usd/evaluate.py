@@ -58,10 +58,9 @@ class ErrorStats:
     maximum: float = 0.0
     counts: np.ndarray = field(default_factory=lambda: np.zeros(int(round(HIST_MAX_MM / HIST_BIN_MM)), np.int64))
     """Histogram counts of ``[k * 0.15, (k + 1) * 0.15)`` mm."""
-    overflow: int = 0
-    """Errors of :data:`HIST_MAX_MM` or more."""
     tail: list = field(default_factory=list)
-    """Those errors themselves (arrays [mm]), for the quantiles past the histogram's end."""
+    """The errors of :data:`HIST_MAX_MM` or more themselves (arrays [mm]), for the quantiles past
+    the histogram's end."""
 
     def add(self, errors_mm: np.ndarray) -> None:
         e = np.asarray(errors_mm, dtype=np.float64).ravel()
@@ -71,9 +70,13 @@ class ErrorStats:
         k = np.floor(e / HIST_BIN_MM).astype(np.int64)
         inside = k < self.counts.shape[0]
         self.counts += np.bincount(k[inside], minlength=self.counts.shape[0])
-        self.overflow += int((~inside).sum())
         if not inside.all():
             self.tail.append(e[~inside])
+
+    @property
+    def overflow(self) -> int:
+        """How many errors were :data:`HIST_MAX_MM` or more."""
+        return sum(t.size for t in self.tail)
 
     @property
     def mean(self) -> float:
