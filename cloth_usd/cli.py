@@ -211,7 +211,8 @@ def _parser() -> argparse.ArgumentParser:
                                                   "the data set config of a physics-trained coarse run")
     ex.add_argument("-o", "--out", required=True, help="bundle folder to write")
     ex.add_argument("--name", required=True, help="bundle name, recorded in every cache it bakes")
-    ex.add_argument("--category", default="tshirt", help="garment category (default tshirt)")
+    ex.add_argument("--category", help="garment category (default: a garment run's own garment's; tshirt for "
+                                       "the paper's runs)")
     ex.add_argument("--metrics", help="metrics.json of cloth-usd evaluate, recorded in the manifest")
     ex.add_argument("--description", default="", help="one line about the training data")
     ex.add_argument("--body-model", help="SMPL-format .npz/.pkl the data was simulated with (default: embedded)")
@@ -540,7 +541,7 @@ def _export(args: argparse.Namespace) -> int:
                                     mocap_dir=args.mocap, body=_body(args.body_model), metrics=metrics)
     else:
         out = export_bundle(args.coarse_run, args.detail_run, args.data, args.out, name=args.name,
-                            category=args.category, metrics=metrics, description=args.description,
+                            category=args.category or "tshirt", metrics=metrics, description=args.description,
                             force=args.force, body=_body(args.body_model), mocap_dir=args.mocap,
                             parity_data=args.parity_data)
     checked = f"the sequences of {args.parity_data}" if args.parity_data else "the validation data"

@@ -475,7 +475,7 @@ def _export(model: HalfStored, path: Path) -> Path:
 
 
 def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None, data_config: str | Path,
-                          out_dir: str | Path, *, name: str, category: str, description: str = "",
+                          out_dir: str | Path, *, name: str, category: str | None = None, description: str = "",
                           force: bool = False, mocap_dir: str | Path | None = None, body: BodyModel | None = None,
                           physics=None, tolerance: float = 1e-5, metrics: dict | None = None) -> Path:
     """Export a garment's coarse (and detail) model as a verified bundle bound to its triangles.
@@ -488,7 +488,8 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
     records the garment's vertex count and triangles' sha256, which a bake checks the scene's
     garment against, and the training poses' and bodies' ranges, and ``metrics`` (``cloth-usd
     evaluate``'s ``metrics.json``) as ``metrics.evaluation``, marked whether it was measured on
-    these very files (re-exporting the same runs writes byte-identical ONNX files).
+    these very files (re-exporting the same runs writes byte-identical ONNX files). ``category``:
+    None takes the garment's own (the data config's garment file records it); another is refused.
     """
     import tempfile
 
@@ -514,6 +515,11 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
     data = physics if physics is not None else physics_set(data_config, body, mocap_dir=mocap_dir)
     if c_info["data"]["config_sha256"] != data.config_sha256:
         raise ArgumentError(f"{coarse_run}: trained on another data set config than {data_config}")
+    factory = load_config(data_config, mocap_dir=mocap_dir)
+    own = load_own_garment(own_garment_files(factory)[0])  # the garment as trained: its rest on its own body
+    if category is not None and category != own.category:
+        raise ArgumentError(f"--category {category}: the runs were trained on a {own.category} "
+                            f"({own_garment_files(factory)[0]}); leave --category out")
     nets = {"coarse": coarse} if detail is None else {"coarse": coarse, "detail": detail}
     val = _prepared(data.split("val"))
     with tempfile.TemporaryDirectory(prefix="cloth-usd-export-") as tmp:
@@ -539,8 +545,6 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
                                 "written")
         fit = tmp / "fit.npz"
         data.fit.save(fit)
-        factory = load_config(data_config, mocap_dir=mocap_dir)
-        own = load_own_garment(own_garment_files(factory)[0])  # the garment as trained: its rest on its own body
         training = {"manifest_sha256": data.config_sha256,
                     "description": description or f"{c_info['data']['train_sequences']} planned sequences of "
                                                   f"{Path(data_config).name}",
@@ -557,7 +561,7 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
             configs["detail"] = {"garment_model": d_info["config"], "best_step": d_info["best_step"]}
             metrics_out["validation"]["detail"] = {"energy": d_info["best_val_energy"],
                                                    "coarse_energy": d_info["val_start_energy"]}
-        out = write_bundle(out_dir, name=name, category=category, coarse_onnx=files["coarse"],
+        out = write_bundle(out_dir, name=name, category=own.category, coarse_onnx=files["coarse"],
                            detail_onnx=files.get("detail"), fit_npz=fit, configs=configs,
                            training_data=training, metrics=metrics_out, opset=OPSET, force=force,
                            form=CoarseForm(CoarseBase.SKINNED, Heading.CANONICAL, CoarseFeatures.BODY),

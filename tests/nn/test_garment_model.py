@@ -187,9 +187,14 @@ def test_export_writes_a_bundle_bound_to_the_garment_that_animates_it(own, tmp_p
     from cloth_usd.datagen import walk_cycle
 
     root, body, data, verts, faces, betas, _, _ = own
+    with pytest.raises(ArgumentError, match=r"^--category dress: the runs were trained on a tshirt \("):
+        export_garment_bundle(root / "coarse", root / "detail", root / "data.json", tmp_path / "b", name="mine",
+                              category="dress", body=body, physics=data)
+    assert not (tmp_path / "b").exists()
     out = export_garment_bundle(root / "coarse", root / "detail", root / "data.json", tmp_path / "b", name="mine",
-                                category="tshirt", body=body, physics=data)
+                                body=body, physics=data)  # the category: the garment's own
     bundle = load_bundle(out)
+    assert bundle.category.value == "tshirt"
     assert bundle.garment.vertices == len(verts) and bundle.garment.faces_sha256 == faces_sha256(faces)
     assert bundle.manifest["models"]["detail"]["inputs"] == ["pose", "betas"]
     parity = bundle.manifest["metrics"]["export_parity"]
