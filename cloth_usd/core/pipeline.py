@@ -40,7 +40,7 @@ from .fit import FIT_LIMIT, FitModel, pair_distances
 from .garment_inputs import skin_displaced
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
-from .postprocess import DEFAULT_MARGIN, StrainLimiter, push_out_of_surface, search_tree
+from .postprocess import DEFAULT_MARGIN, LIMIT_CHECK_TOLERANCE, StrainLimiter, push_out_of_surface, search_tree
 from .scene import Category
 from .skinning import SkinBinding, bind_worn, skin_garment
 from .smpl import JOINT_NAMES
@@ -365,12 +365,32 @@ def post_process(pair: GarmentPair, posed: PosedBody, points: np.ndarray, *, mar
     (:func:`~cloth_usd.core.postprocess.push_out_of_surface`, ``margin`` [m] in front of it;
     ``trees``: :func:`contact_trees` of ``posed`` when the caller built them already).
 
+    A frame that the limit and the push leave more stretched than the models made it (the
+    :data:`~cloth_usd.core.postprocess.LIMIT_CHECK_QUANTILE` of its edges over their rest
+    lengths, by more than :data:`~cloth_usd.core.postprocess.LIMIT_CHECK_TOLERANCE`) is pushed
+    again without the limit, and whichever of the two is less stretched is kept: where the body
+    leaves the garment too little cloth (legs spread in a kick), limiting it pulls it into the
+    body and the push tears it.
+
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``.
     """
-    m = limiter(points) if limiter is not None else points
-    return push_out_of_surface(m, posed.patch_points, posed.patch_normals, pair.patch.faces, pair.patch.contact,
-                               margin=margin, rings=pair.patch.rings, trees=trees)
+
+    def push(m: np.ndarray, frames: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        return push_out_of_surface(m, posed.patch_points[frames], posed.patch_normals[frames], pair.patch.faces,
+                                   pair.patch.contact, margin=margin, rings=pair.patch.rings,
+                                   trees=None if trees is None else [trees[t] for t in np.arange(len(trees))[frames]])
+
+    if limiter is None:
+        return push(points)
+    out, moved = push(limiter(points))
+    after = limiter.stretch(out)
+    worse = np.flatnonzero(after > limiter.stretch(points) + LIMIT_CHECK_TOLERANCE)
+    if worse.size:
+        alone, alone_moved = push(np.asarray(points)[worse], worse)
+        better = limiter.stretch(alone) < after[worse]
+        out[worse[better]], moved[worse[better]] = alone[better], alone_moved[better]
+    return out, moved
 
 
 #: A garment's own model: (T, 72) poses in the canonical heading -> (T, N, 3) displacement of

@@ -199,3 +199,45 @@ def test_a_fit_far_outside_training_is_clamped_for_the_models():
     inside = prepare_pair(body, np.zeros(10), rest, faces, fit)  # within the limit: read as measured
     assert np.abs(inside.alpha_measured).max() <= FIT_LIMIT
     np.testing.assert_array_equal(inside.alpha, inside.alpha_measured)
+
+
+def test_the_post_process_pushes_a_frame_without_the_strain_limit_where_the_limit_would_tear_it():
+    """A frame that the strain limit and the push leave more stretched than the models made it
+    is pushed without the limit (where the body leaves a garment too little cloth, the limit pulls
+    it into the body and the push tears it: trousers in a kick); every other frame is limited."""
+    from cloth_usd.core.pipeline import post_process
+    from cloth_usd.core.postprocess import StrainLimiter, push_out_of_surface
+    from cloth_usd.core.skinning import skin_garment
+
+    body = load_body_model()
+    betas = np.zeros(10)
+    rest, faces = make_tshirt(body, betas, TShirtParams(target_vertices=600))
+    pair = prepare_pair(body, betas, rest, faces, find_bundle("tshirt").fit)
+    poses, transl = walk_cycle(3)
+    posed = pose_body(body, pair, poses, transl)
+    raw = skin_garment(pair.binding, poses, transl, body.parents)
+
+    def push(m):
+        return push_out_of_surface(m, posed.patch_points, posed.patch_normals, pair.patch.faces, pair.patch.contact,
+                                   rings=pair.patch.rings)
+
+    centre = raw.mean(axis=1, keepdims=True)
+    loose = centre + 1.2 * (raw - centre)  # a model's shirt stretched a fifth: limiting helps, every frame limited
+    fits = StrainLimiter(rest, faces)
+    got, moved = post_process(pair, posed, loose, limiter=fits)
+    want, want_moved = push(fits(loose))
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(moved, want_moved)
+    assert (fits.stretch(got) < fits.stretch(loose) - 0.1).all()
+    np.testing.assert_allclose(post_process(pair, posed, raw, limiter=fits)[0], push(fits(raw))[0])  # left as it is
+    # a rest 0.7 x the shirt's size: limited to 1.05 of it, the shirt shrinks into the body
+    small = StrainLimiter(rest.mean(axis=0) + 0.7 * (rest - rest.mean(axis=0)), faces)
+    torn, _ = push(small(raw))
+    assert (small.stretch(torn) > small.stretch(raw)).all()
+    got, moved = post_process(pair, posed, raw, limiter=small)
+    want, want_moved = push(raw)
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(moved, want_moved)
+    assert (small.stretch(got) < small.stretch(torn)).all()
+    np.testing.assert_allclose(small.stretch(raw[:1], 0.5), np.quantile(
+        np.linalg.norm(raw[0, small.edges[:, 1]] - raw[0, small.edges[:, 0]], axis=1) / small.rest_lengths, 0.5))

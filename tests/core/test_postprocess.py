@@ -247,7 +247,8 @@ def test_the_strain_limiter_shortens_stretched_edges_and_leaves_the_rest():
     assert (lengths(stretched) / lengths(rest)).max() == pytest.approx(1.5)
     assert ratio.max() < 1.13, ratio.max()
     np.testing.assert_allclose(out[0].mean(axis=0), stretched.mean(axis=0), atol=1e-4)
-    np.testing.assert_allclose(out[1], rest, atol=1e-6)
+    # float32 solves beside the stretched frames: 1.03e-6 off on some CPUs
+    np.testing.assert_allclose(out[1], rest, atol=5e-6)
     np.testing.assert_allclose(out[0], out[2], atol=1e-6)  # float32 solves
 
 

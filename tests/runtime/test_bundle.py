@@ -271,6 +271,30 @@ def test_the_sample_shirt_bakes_with_its_own_shipped_bundle():
     assert bundle.manifest["metrics"]["evaluation"]["bundle"]["reads"] == "authored"
 
 
+def test_the_sample_dress_bakes_with_its_own_shipped_bundle():
+    """Like the sample shirt, the sample dress has a bundle of its own (train-garment's garment form,
+    the hybrid objective) that comes before dress-v1, and it travels with its evaluation against
+    Newton and on the held-out real clips (no frame replaced by the guard), measured on its own files."""
+    from cloth_usd.core.body import load_body_model, shape_body
+    from cloth_usd.core.frames import worn_rest_points
+    from cloth_usd.usd.read import open_stage, read_scene
+
+    root = Path(__file__).resolve().parents[2] / "samples"
+    scene = read_scene(open_stage(root / "walk_dress" / "scene.usda"))
+    dress, char = scene.garments[0], scene.characters[0]
+    bundle = find_bundle("dress", worn=(len(dress.rest_points), dress.triangles))
+    assert bundle.name == "sample-dress-own" and bundle.category.value == "dress"
+    assert bundle.detail_adds_coarse and bundle.tiers == (Tier.COARSE, Tier.DETAIL)
+    rest = worn_rest_points(char, dress.rest_points, shape_body(load_body_model(), char.betas)[1])
+    np.testing.assert_allclose(bundle.garment_rest[0], rest, atol=1e-6)
+    assert find_bundle("dress").name == "dress-v1"  # any other dress
+    trousers = read_scene(open_stage(root / "walk_trousers" / "scene.usda")).garments[0]
+    assert find_bundle("trousers", worn=(len(trousers.rest_points), trousers.triangles)).name == "trousers-v2"
+    _assert_shipped_evaluation(bundle)
+    assert bundle.manifest["metrics"]["evaluation"]["bundle"]["reads"] == "authored"
+    assert "Newton's frames of 10" in bundle.manifest["training_data"]["description"]
+
+
 def test_tshirt_v3_keeps_its_ordered_evaluation():
     """The supervised bundle before it: detail < coarse < skinning on every row of its own test
     sets (issue #4), measured on its own ONNX files."""
