@@ -6,7 +6,9 @@ measured after each step of the post-process: the models' garment, after the str
 (``--rounds``, each a row, at ``--limit``; a bake runs
 :data:`~cloth_usd.core.postprocess.STRAIN_ITERATIONS` rounds at
 :data:`~cloth_usd.core.postprocess.STRAIN_LIMIT`) and after the push out of the body that follows
-it. Per row, over every ``--every``-th frame:
+it, and the whole post-process as a bake runs it (``pipeline.post_process``: a frame the limit and
+the push leave more stretched than the models made it is pushed without the limit). Per row, over
+every ``--every``-th frame:
 
 - edge stretch against the rest garment: the median frame's 99th percentile, the worst frame's,
   the largest edge, and the frames with an edge longer than ``--long`` (1.5) times its rest;
@@ -18,6 +20,9 @@ it. Per row, over every ``--every``-th frame:
   within 1 cm of a garment triangle (one off the garment's open edges) that lie in front of it along
   their own normal, more than 1 mm, per frame (the specks of skin a close-up render shows through a
   taut sleeve even when no garment vertex is inside the body);
+- each frame's largest vertex move from the models' garment (the median frame's and the most):
+  the strain limiter's global solve can move a whole region to shorten its edges (a trouser leg
+  drawn down off a thigh raised to the chest);
 - wall time of the step per frame.
 
 Run: python bench/bench_postprocess_stages.py --shot OUT/04.usda [--shot ...] [--bundle DIR]
@@ -37,7 +42,7 @@ import numpy as np
 from cloth_usd.core.association import incident_faces
 from cloth_usd.core.body import load_body_model, posed_vertices
 from cloth_usd.core.features import vertex_normals
-from cloth_usd.core.pipeline import pose_body
+from cloth_usd.core.pipeline import pose_body, post_process
 from cloth_usd.core.postprocess import STRAIN_LIMIT, _closest_surface, mesh_edges, push_out_of_surface
 from cloth_usd.datagen.simulate import body_side, edge_ratios
 from cloth_usd.datagen.tshirt import _boundary_vertices
@@ -116,6 +121,7 @@ def main(argv=None) -> int:
 
         def row(stage_name, x, ms, before=None):
             s = edge_ratios(x, rest, edges)
+            moved = np.linalg.norm(x - raw, axis=-1).max(axis=1)  # each frame's largest move from the models' garment
             p99 = np.percentile(s, 99, axis=1)
             side = np.stack([body_side(x[t], bodies[t], body.faces) for t in range(len(times))])
             through = np.array([body_through(x[t], inner, ring, bodies[t], normals[t]) for t in range(len(times))])
@@ -124,7 +130,8 @@ def main(argv=None) -> int:
                  "max": float(s.max()), "frames_long": int(np.sum(s.max(axis=1) > args.long)),
                  "inside": float(np.mean(side < 0)), "inside_1mm": float(np.mean(side < -1e-3)),
                  "through_median": float(np.median(through)), "through_max": int(through.max()),
-                 "frames_through": int(np.count_nonzero(through))}
+                 "frames_through": int(np.count_nonzero(through)),
+                 "move_median_mm": float(np.median(1e3 * moved)), "move_max_mm": float(1e3 * moved.max())}
             if before is not None:  # the push: which long edges it made, and how
                 f, k = np.nonzero(s > args.long)
                 a = x[f, edges[k, 0]] - before[f, edges[k, 0]]
@@ -152,18 +159,24 @@ def main(argv=None) -> int:
             push_ms = 1e3 * (time.perf_counter() - start) / len(times)
             row(f"limited to {args.limit:g} x{rounds}, pushed", pushed, limit_ms + push_ms,
                 before=limited)
+            start = time.perf_counter()  # as a bake runs it: a frame the limit and the push tear is pushed alone
+            baked = post_process(learned.pair, posed, raw, margin=learned.margin, limiter=learned.limiter)[0]
+            row(f"limited to {args.limit:g} x{rounds}, pushed, checked (a bake)", baked,
+                1e3 * (time.perf_counter() - start) / len(times))
     (out / "postprocess_stages.json").write_text(json.dumps(rows, indent=1))
     lines = ["| shot | stage | ms/frame | stretch p99 median / worst, max | frames with an edge > "
              f"{args.long} | long edges after the push: already before / one end pushed / torn | inside "
-             "(deeper than 1 mm) | body vertices through the garment: frames, median / most a frame |",
-             "|---|---|---:|---:|---:|---:|---:|---:|"]
+             "(deeper than 1 mm) | body vertices through the garment: frames, median / most a frame | largest "
+             "move from the models' garment, median / most a frame [mm] |",
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         made = (f"{r['long_edges']}: {r['long_before_push']} / {r['long_one_end_pushed']} / {r['long_torn']}"
                 if "long_edges" in r else "")
         lines.append(f"| {r['shot']} | {r['stage']} | {r['ms_per_frame']:.1f} | {r['p99_median']:.3f} / "
                      f"{r['p99_worst']:.3f}, {r['max']:.2f} | {r['frames_long']} / {r['frames']} | {made} | "
                      f"{100 * r['inside']:.2f}% ({100 * r['inside_1mm']:.2f}%) | {r['frames_through']} / "
-                     f"{r['frames']}, {r['through_median']:g} / {r['through_max']} |")
+                     f"{r['frames']}, {r['through_median']:g} / {r['through_max']} | {r['move_median_mm']:.0f} / "
+                     f"{r['move_max_mm']:.0f} |")
     text = "\n".join(lines) + "\n"
     (out / "postprocess_stages.md").write_text(text)
     print(text)
