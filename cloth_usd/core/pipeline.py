@@ -40,7 +40,8 @@ from .fit import FIT_LIMIT, FitModel, pair_distances
 from .garment_inputs import skin_displaced
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
-from .postprocess import DEFAULT_MARGIN, LIMIT_CHECK_TOLERANCE, StrainLimiter, push_out_of_surface, search_tree
+from .postprocess import (DEFAULT_MARGIN, LIMIT_CHECK_QUANTILE, LIMIT_CHECK_TOLERANCE, LIMIT_MOVE_BOUND, StrainLimiter,
+                          push_out_of_surface, search_tree)
 from .scene import Category
 from .skinning import SkinBinding, bind_worn, skin_garment
 from .smpl import JOINT_NAMES
@@ -365,29 +366,40 @@ def post_process(pair: GarmentPair, posed: PosedBody, points: np.ndarray, *, mar
     (:func:`~cloth_usd.core.postprocess.push_out_of_surface`, ``margin`` [m] in front of it;
     ``trees``: :func:`contact_trees` of ``posed`` when the caller built them already).
 
-    A frame that the limit and the push leave more stretched than the models made it (the
+    A frame whose vertices the limit would move further than
+    :data:`~cloth_usd.core.postprocess.LIMIT_MOVE_BOUND` (at the
+    :data:`~cloth_usd.core.postprocess.LIMIT_CHECK_QUANTILE` of the moves: a region, not a spike
+    pulled back) is pushed without it: the limit's solve does not see the body, and a move that
+    far slides a region of cloth along it (a trouser leg off a thigh raised to the chest) rather
+    than shortening its edges. A frame that the limit and
+    the push leave more stretched than the models made it (the
     :data:`~cloth_usd.core.postprocess.LIMIT_CHECK_QUANTILE` of its edges over their rest
     lengths, by more than :data:`~cloth_usd.core.postprocess.LIMIT_CHECK_TOLERANCE`) is pushed
     again without the limit, and whichever of the two is less stretched is kept: where the body
-    leaves the garment too little cloth (legs spread in a kick), limiting it pulls it into the
-    body and the push tears it.
+    leaves a garment too little cloth (legs spread in a kick), limiting it pulls it into the body
+    and the push tears it.
 
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``.
     """
 
-    def push(m: np.ndarray, frames: np.ndarray | slice = slice(None)) -> tuple[np.ndarray, np.ndarray]:
-        return push_out_of_surface(m, posed.patch_points[frames], posed.patch_normals[frames], pair.patch.faces,
-                                   pair.patch.contact, margin=margin, rings=pair.patch.rings,
-                                   trees=None if trees is None else [trees[t] for t in np.arange(len(trees))[frames]])
+    def push(m: np.ndarray, frames: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        at = slice(None) if frames is None else frames
+        picked = trees if trees is None or frames is None else [trees[t] for t in frames]
+        return push_out_of_surface(m, posed.patch_points[at], posed.patch_normals[at], pair.patch.faces,
+                                   pair.patch.contact, margin=margin, rings=pair.patch.rings, trees=picked)
 
     if limiter is None:
         return push(points)
-    out, moved = push(limiter(points))
+    points = np.asarray(points)
+    limited = limiter(points)
+    move = np.linalg.norm(limited - points, axis=-1)
+    slides = np.quantile(move, LIMIT_CHECK_QUANTILE, axis=1) > LIMIT_MOVE_BOUND
+    out, moved = push(np.where(slides[:, None, None], points, limited))
     after = limiter.stretch(out)
-    worse = np.flatnonzero(after > limiter.stretch(points) + LIMIT_CHECK_TOLERANCE)
+    worse = np.flatnonzero(~slides & (after > limiter.stretch(points) + LIMIT_CHECK_TOLERANCE))
     if worse.size:
-        alone, alone_moved = push(np.asarray(points)[worse], worse)
+        alone, alone_moved = push(points[worse], worse)
         better = limiter.stretch(alone) < after[worse]
         out[worse[better]], moved[worse[better]] = alone[better], alone_moved[better]
     return out, moved

@@ -516,10 +516,11 @@ def export_garment_bundle(coarse_run: str | Path, detail_run: str | Path | None,
     if c_info["data"]["config_sha256"] != data.config_sha256:
         raise ArgumentError(f"{coarse_run}: trained on another data set config than {data_config}")
     factory = load_config(data_config, mocap_dir=mocap_dir)
-    own = load_own_garment(own_garment_files(factory)[0])  # the garment as trained: its rest on its own body
+    garment_file = own_garment_files(factory)[0]
+    own = load_own_garment(garment_file)  # the garment as trained: its rest on its own body
     if category is not None and category != own.category:
         raise ArgumentError(f"--category {category}: the runs were trained on a {own.category} "
-                            f"({own_garment_files(factory)[0]}); leave --category out")
+                            f"({garment_file}); leave --category out")
     nets = {"coarse": coarse} if detail is None else {"coarse": coarse, "detail": detail}
     val = _prepared(data.split("val"))
     with tempfile.TemporaryDirectory(prefix="cloth-usd-export-") as tmp:

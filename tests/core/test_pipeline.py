@@ -204,9 +204,11 @@ def test_a_fit_far_outside_training_is_clamped_for_the_models():
 def test_the_post_process_pushes_a_frame_without_the_strain_limit_where_the_limit_would_tear_it():
     """A frame that the strain limit and the push leave more stretched than the models made it
     is pushed without the limit (where the body leaves a garment too little cloth, the limit pulls
-    it into the body and the push tears it: trousers in a kick); every other frame is limited."""
+    it into the body and the push tears it: trousers in a kick), as is a frame the limit would move
+    too far (it slides cloth along the body: a trouser leg off a raised thigh); every other frame
+    is limited."""
     from cloth_usd.core.pipeline import post_process
-    from cloth_usd.core.postprocess import StrainLimiter, push_out_of_surface
+    from cloth_usd.core.postprocess import LIMIT_MOVE_BOUND, StrainLimiter, push_out_of_surface
     from cloth_usd.core.skinning import skin_garment
 
     body = load_body_model()
@@ -230,8 +232,23 @@ def test_the_post_process_pushes_a_frame_without_the_strain_limit_where_the_limi
     np.testing.assert_array_equal(moved, want_moved)
     assert (fits.stretch(got) < fits.stretch(loose) - 0.1).all()
     np.testing.assert_allclose(post_process(pair, posed, raw, limiter=fits)[0], push(fits(raw))[0])  # left as it is
-    # a rest 0.7 x the shirt's size: limited to 1.05 of it, the shirt shrinks into the body
-    small = StrainLimiter(rest.mean(axis=0) + 0.7 * (rest - rest.mean(axis=0)), faces)
+    # stretched by half: the limit would move the hem further than LIMIT_MOVE_BOUND, so it is not limited
+    looser = centre + 1.5 * (raw - centre)
+    assert (np.linalg.norm(fits(looser) - looser, axis=-1).max(axis=1) > LIMIT_MOVE_BOUND).all()
+    got, moved = post_process(pair, posed, looser, limiter=fits)
+    want, want_moved = push(looser)
+    np.testing.assert_array_equal(got, want)
+    np.testing.assert_array_equal(moved, want_moved)
+    spiked = loose.copy()  # and one vertex pulled 30 cm out: the limit pulls it back, a spike, not a region
+    spiked[:, 0] += [0.0, 0.0, 0.3]
+    assert (np.linalg.norm(fits(spiked) - spiked, axis=-1).max(axis=1) > LIMIT_MOVE_BOUND).all()
+    np.testing.assert_array_equal(post_process(pair, posed, spiked, limiter=fits)[0], push(fits(spiked))[0])
+    mixed = np.concatenate([loose[:1], looser[1:2], loose[2:]])  # judged frame by frame
+    np.testing.assert_array_equal(post_process(pair, posed, mixed, limiter=fits)[0][[0, 2]],
+                                  push(fits(loose))[0][[0, 2]])
+    # a rest 0.8 x the shirt's size: limited to 1.05 of it, the shirt shrinks into the body
+    small = StrainLimiter(rest.mean(axis=0) + 0.8 * (rest - rest.mean(axis=0)), faces)
+    assert (np.linalg.norm(small(raw) - raw, axis=-1).max(axis=1) < LIMIT_MOVE_BOUND).all()
     torn, _ = push(small(raw))
     assert (small.stretch(torn) > small.stretch(raw)).all()
     got, moved = post_process(pair, posed, raw, limiter=small)
