@@ -285,8 +285,8 @@ LIMIT_CHECK_QUANTILE = 0.99
 #: left for the post-process to push it again without the limit: more than the float32 solve's
 #: rounding of a garment the limit leaves as it is.
 LIMIT_CHECK_TOLERANCE = 0.01
-#: How far [m] the strain limit may move a garment's vertices: a frame where it would move more of
-#: them further than this than :data:`LIMIT_CHECK_QUANTILE` allows (1%) is pushed out of the body
+#: How far [m] the strain limit may move a garment's vertices: a frame where it would move more
+#: than 1% of them (above :data:`LIMIT_CHECK_QUANTILE`) further than this is pushed out of the body
 #: without it (:func:`~cloth_usd.core.pipeline.post_process`). The limit's solve does not see the
 #: body and holds each vertex only weakly (:data:`STRAIN_ANCHOR`), so it can slide a whole region
 #: of cloth: the sample trousers' own bundle on CMU martial arts 04, a knee raised to the chest
