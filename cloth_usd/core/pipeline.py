@@ -40,8 +40,8 @@ from .fit import FIT_LIMIT, FitModel, pair_distances
 from .garment_inputs import skin_displaced
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
-from .postprocess import (DEFAULT_MARGIN, LIMIT_CHECK_QUANTILE, LIMIT_CHECK_TOLERANCE, LIMIT_MOVE_BOUND, StrainLimiter,
-                          push_out_of_surface, search_tree)
+from .postprocess import (DEFAULT_MARGIN, LIMIT_CHECK_TOLERANCE, StrainLimiter, limit_slides, push_out_of_surface,
+                          search_tree)
 from .scene import Category
 from .skinning import SkinBinding, bind_worn, skin_garment
 from .smpl import JOINT_NAMES
@@ -366,10 +366,9 @@ def post_process(pair: GarmentPair, posed: PosedBody, points: np.ndarray, *, mar
     (:func:`~cloth_usd.core.postprocess.push_out_of_surface`, ``margin`` [m] in front of it;
     ``trees``: :func:`contact_trees` of ``posed`` when the caller built them already).
 
-    A frame whose vertices the limit would move further than
-    :data:`~cloth_usd.core.postprocess.LIMIT_MOVE_BOUND` (at the
-    :data:`~cloth_usd.core.postprocess.LIMIT_CHECK_QUANTILE` of the moves: a region, not a spike
-    pulled back) is pushed without it: the limit's solve does not see the body, and a move that
+    A frame whose vertices the limit would move too far
+    (:func:`~cloth_usd.core.postprocess.limit_slides`: a region, not a spike pulled back) is pushed
+    without it: the limit's solve does not see the body, and a move that
     far slides a region of cloth along it (a trouser leg off a thigh raised to the chest) rather
     than shortening its edges. A frame that the limit and
     the push leave more stretched than the models made it (the
@@ -393,8 +392,7 @@ def post_process(pair: GarmentPair, posed: PosedBody, points: np.ndarray, *, mar
         return push(points)
     points = np.asarray(points)
     limited = limiter(points)
-    move = np.linalg.norm(limited - points, axis=-1)
-    slides = np.quantile(move, LIMIT_CHECK_QUANTILE, axis=1) > LIMIT_MOVE_BOUND
+    slides = limit_slides(points, limited)
     out, moved = push(np.where(slides[:, None, None], points, limited))
     after = limiter.stretch(out)
     worse = np.flatnonzero(~slides & (after > limiter.stretch(points) + LIMIT_CHECK_TOLERANCE))

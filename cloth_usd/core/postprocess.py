@@ -26,7 +26,7 @@ from .association import closest_point_on_triangles, incident_faces
 __all__ = ["push_out", "push_out_of_surface", "StrainLimiter", "check_strain_limit", "mesh_edges", "STRAIN_LIMIT",
            "STRAIN_ITERATIONS", "STRAIN_ANCHOR", "nearest_vertex", "nearest_body_points", "search_tree",
            "garment_margin", "DEFAULT_MARGIN", "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_ROUNDS",
-           "PLANE_REACH"]
+           "PLANE_REACH", "limit_slides", "LIMIT_CHECK_QUANTILE", "LIMIT_CHECK_TOLERANCE", "LIMIT_MOVE_BOUND"]
 
 #: Default clearance from the body surface [m] (2 mm).
 DEFAULT_MARGIN = 0.002
@@ -406,6 +406,15 @@ class StrainLimiter:
             return np.ones(p.shape[0])
         d = p[:, self.edges[:, 1]] - p[:, self.edges[:, 0]]
         return np.quantile(np.sqrt(np.einsum("tec,tec->te", d, d)) * self._per_rest, quantile, axis=1)
+
+
+def limit_slides(points: np.ndarray, limited: np.ndarray) -> np.ndarray:
+    """(T,) bool the frames where the strain limit moved the garment (T, N, 3) to ``limited`` by
+    more than :data:`LIMIT_MOVE_BOUND` at the :data:`LIMIT_CHECK_QUANTILE` of its vertices' moves: a
+    region slid along the body, not a spike pulled back (:func:`~cloth_usd.core.pipeline.post_process`
+    pushes such a frame without the limit)."""
+    move = np.linalg.norm(np.asarray(limited) - np.asarray(points), axis=-1)
+    return np.quantile(move, LIMIT_CHECK_QUANTILE, axis=1) > LIMIT_MOVE_BOUND
 
 
 def garment_margin(rest_points: np.ndarray, faces: np.ndarray, *, base: float = DEFAULT_MARGIN,
