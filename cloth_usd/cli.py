@@ -327,7 +327,8 @@ def _datagen(args: argparse.Namespace) -> int:
     deadline = time.time() + 60.0 * args.max_minutes if args.max_minutes is not None else None
     manifest = run_factory(load_config(args.config, mocap_dir=args.mocap), args.output, workers=args.workers,
                            batch=args.batch, penetration_frames=args.penetration_frames, deadline=deadline)
-    sys.stdout.write(f"{len(manifest.accepted)} sequences simulated, {len(manifest.rejected)} rejected "
+    partial = f" ({len(manifest.partial)} of them unstable, their first frames kept)" if manifest.partial else ""
+    sys.stdout.write(f"{len(manifest.accepted)} sequences simulated{partial}, {len(manifest.rejected)} rejected "
                      f"as unstable; manifest in {args.output}/manifest.json\n")
     if manifest.rejected and not manifest.accepted:  # not a data set: nothing to train on or measure against
         from .datagen.simulate import SimulationError
@@ -336,7 +337,8 @@ def _datagen(args: argparse.Namespace) -> int:
         failure = (manifest.sequences[first].get("quality") or {}).get("failure") or "unstable"
         raise SimulationError(f"{args.config}: every sequence was rejected as unstable ({first}: {failure}); where "
                               "a hand, an elbow or a raised knee presses into the cloth Newton's own cloth can stretch "
-                              "past the config's sim.max_stretch (1.6 unless set): raise it there to keep them")
+                              "past the config's sim.max_stretch (1.6 unless set): raise it there to keep them, "
+                              "or set sim.keep_partial to keep their frames before it")
     return 0
 
 

@@ -136,6 +136,12 @@ class Manifest:
         return sorted(k for k, v in self.sequences.items() if v["status"] == "rejected")
 
     @property
+    def partial(self) -> list[str]:
+        """The accepted sequences that went unstable and keep only their first frames
+        (``SimConfig.keep_partial``)."""
+        return sorted(k for k, v in self.sequences.items() if v["status"] == "ok" and v.get("partial"))
+
+    @property
     def accepted(self) -> list[str]:
         return sorted(k for k, v in self.sequences.items() if v["status"] == "ok")
 

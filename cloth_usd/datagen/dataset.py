@@ -134,7 +134,10 @@ def _check_name(name: str) -> None:
 
 def make_shard(job: Job, result: SimResult, body: BodyModel, config: SimConfig,
                dataset: DatasetConfig, digest: str) -> Shard:
-    """Assemble a shard from a job and its (stable) simulation."""
+    """Assemble a shard from a job and its simulation: stable, or the part of an unstable one a
+    data set keeps (:meth:`~cloth_usd.datagen.simulate.SimResult.partial`), whose frames are the
+    job's first ones."""
+    frames = result.frames_done
     assoc, fit, surf = fit_inputs(body, job.betas, job.garment_vertices)
     coarse = laplacian_smooth(result.positions, job.garment_faces, iterations=dataset.coarse_iterations,
                               lam=dataset.coarse_lambda)
@@ -144,8 +147,8 @@ def make_shard(job: Job, result: SimResult, body: BodyModel, config: SimConfig,
         garment_vertices=np.asarray(job.garment_vertices, dtype=np.float32),
         garment_faces=np.asarray(job.garment_faces, dtype=np.int64),
         positions=result.positions.astype(np.float32), coarse=coarse.astype(np.float32),
-        betas=np.asarray(job.betas, dtype=np.float64), poses=np.asarray(job.poses, dtype=np.float64),
-        transl=np.asarray(job.transl, dtype=np.float64), assoc_vertex=assoc.astype(np.int64),
+        betas=np.asarray(job.betas, dtype=np.float64), poses=np.asarray(job.poses[:frames], dtype=np.float64),
+        transl=np.asarray(job.transl[:frames], dtype=np.float64), assoc_vertex=assoc.astype(np.int64),
         fit_distance=fit.astype(np.float32), surface_distance=surf.astype(np.float32),
         penetration=result.penetration.astype(np.float32), max_stretch=result.max_stretch.astype(np.float32),
         digest=digest, meta=meta)
@@ -199,7 +202,8 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
         digest = job.digest(config, dataset)
         path = out / f"{job.name}.npz"
         prior = manifest.sequences.get(job.name) or earlier.get(job.name)
-        if prior and prior.get("digest") == digest and prior["status"] == "rejected":
+        if prior and prior.get("digest") == digest and prior["status"] == "rejected" \
+                and (not config.keep_partial or prior.get("keep_partial", 0) == config.keep_partial):
             log.info("%s: rejected before with the same inputs, skipped", job.name)
             continue
         if path.exists() and shard_is_valid(path, digest):
@@ -215,13 +219,23 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
 
     def record(job: Job, digest: str, path: Path, result: SimResult) -> None:
         entry = {"seed": int(job.seed), "digest": digest, "quality": result.quality(), "meta": job.meta}
+        part = result.partial(config.keep_partial, config.fps, warmup=int((job.meta or {}).get("warmup_frames", 0)))
         if result.is_stable:
             write_shard(path, make_shard(job, result, body, config, dataset, digest))
             entry.update(status="ok", shard=path.name)
+        elif part is not None:
+            write_shard(path, make_shard(job, part, body, config, dataset, digest))
+            log.warning("%s: unstable (%s); its first %d of %d frames kept", job.name, result.failure or "unstable",
+                        part.frames_done, result.frames_requested)
+            entry.update(status="ok", shard=path.name, quality=part.quality(), keep_partial=config.keep_partial,
+                         partial={"frames": part.frames_done, "frames_requested": result.frames_requested,
+                                  "failure": result.failure})
         else:
             log.warning("%s: rejected (%s)", job.name, result.failure or "unstable")
             path.unlink(missing_ok=True)  # a stale shard of older inputs must not survive
             entry.update(status="rejected", shard=None)
+            if config.keep_partial:
+                entry.update(keep_partial=config.keep_partial)
         manifest.sequences[job.name] = entry
         manifest.write(out, manifest_name)
 

@@ -27,6 +27,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import logging
+import math
 import time
 from dataclasses import dataclass
 from enum import Enum
@@ -41,6 +42,7 @@ from ..errors import ClothUsdError
 __all__ = [
     "SimConfig",
     "SimResult",
+    "PARTIAL_MARGIN_SECONDS",
     "SimulationError",
     "ColliderKind",
     "SolverKind",
@@ -167,6 +169,15 @@ class SimConfig:
     """A garment vertex moving faster than this [m/s] between frames marks the frame unstable."""
     max_stretch: float = 1.6
     """An edge longer than this many times its rest length marks the frame unstable."""
+    keep_partial: int = 0
+    """What a data set keeps of a sequence that goes unstable: 0 rejects it whole; n > 0 keeps
+    its frames up to ``PARTIAL_MARGIN_SECONDS`` before the first unstable one, where that
+    leaves at least n frames past the motion's warm-up (its blend in from rest, which training
+    and evaluation leave out): a shard shorter than its motion, whose frames the hybrid
+    objective's supervised term and a test set's measure reach alone. It decides what is kept
+    of a run, not how the run simulates, so :meth:`to_json` leaves it out: a data set made
+    without it keeps its digests, and turning it on simulates again only the sequences
+    rejected before."""
     device: str = "auto"
     """Warp device: "auto" (CUDA when present, else CPU), "cpu", "cuda", "cuda:1", ..."""
     drape_frames: int = 12
@@ -179,6 +190,9 @@ class SimConfig:
             if not getattr(self, name) >= 0 or (name in ("fps", "substeps", "iterations")
                                                  and getattr(self, name) <= 0):
                 raise SimulationError(f"SimConfig.{name} must be positive, got {getattr(self, name)}")
+        if not isinstance(self.keep_partial, int) or self.keep_partial < 0:
+            raise SimulationError(f"SimConfig.keep_partial must be a whole number of frames >= 0, "
+                                  f"got {self.keep_partial!r}")
         if self.max_stretch <= 1.0:
             raise SimulationError(f"SimConfig.max_stretch must exceed 1, got {self.max_stretch}")
         if self.collider_faces is not None and self.collider_faces < 100:
@@ -202,7 +216,13 @@ class SimConfig:
         out = {**dataclasses.asdict(self), "collider": self.collider.value, "solver": self.solver.value}
         if self.solver is SolverKind.VBD:
             del out["solver"]
+        del out["keep_partial"]  # what a data set keeps, not how it simulates (see the field)
         return out
+
+
+#: What a kept part of an unstable sequence (:attr:`SimConfig.keep_partial`) leaves out before
+#: its first unstable frame [s]: the frames that run up to it.
+PARTIAL_MARGIN_SECONDS = 0.2
 
 
 @dataclass(frozen=True)
@@ -242,6 +262,23 @@ class SimResult:
     def is_stable(self) -> bool:
         """Every frame was simulated and every frame is stable."""
         return self.frames_done == self.frames_requested and bool(np.all(self.stable))
+
+    def partial(self, min_frames: int, fps: float, warmup: int = 0) -> "SimResult | None":
+        """The part of an unstable sequence a data set keeps (:attr:`SimConfig.keep_partial`):
+        its frames up to ``PARTIAL_MARGIN_SECONDS`` before the first unstable one, when at least
+        ``min_frames`` (> 0) of them come after the first ``warmup``; None otherwise, and for a
+        stable sequence. The part keeps ``frames_requested`` and ``failure``, so its
+        :meth:`quality` says what it was cut from."""
+        if self.is_stable or min_frames <= 0:
+            return None
+        bad = np.flatnonzero(~np.asarray(self.stable, dtype=bool))
+        first_bad = int(bad[0]) if bad.size else self.frames_done
+        keep = first_bad - int(math.ceil(PARTIAL_MARGIN_SECONDS * fps - 1e-9))
+        if keep - max(int(warmup), 0) < min_frames:
+            return None
+        return dataclasses.replace(
+            self, positions=self.positions[:keep], nan=self.nan[:keep], penetration=self.penetration[:keep],
+            max_stretch=self.max_stretch[:keep], max_speed=self.max_speed[:keep], stable=self.stable[:keep])
 
     def quality(self) -> dict:
         """Summary figures (JSON-able) for manifests."""

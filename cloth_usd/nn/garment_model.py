@@ -368,7 +368,7 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, decay)
     targets = _sim_targets(train, config.sim_target)
     examples = [(k, t) for k, c in enumerate(train) for t in range(_first(c.source), c.source.num_frames)]
-    simulated = [(k, t) for k, t in examples if k in targets]
+    simulated = [(k, t) for k, t in examples if k in targets and t < len(targets[k])]
     share = config.supervised_share if simulated else 0.0
     run = Path(run_dir)
     run.mkdir(parents=True, exist_ok=True)
@@ -387,7 +387,10 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
         k, _ = pool[int(rng.integers(len(pool)))]  # a batch shares one clip (one body)
         clip = train[k]
         lo = _first(clip.source)
-        frames = np.sort(rng.integers(lo, clip.source.num_frames, config.batch))
+        # a supervised batch draws from the frames with a target (a kept part of an unstable
+        # sequence has its first frames only)
+        hi = min(clip.source.num_frames, len(targets[k])) if supervised else clip.source.num_frames
+        frames = np.sort(rng.integers(lo, hi, config.batch))
         x = _garment(net, clip, frames, body, fixed)
         loss = _energy(clip.source, x, frames, body, material)["total"].mean()
         if supervised:

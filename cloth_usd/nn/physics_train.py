@@ -71,7 +71,7 @@ import torch
 
 from ..core.body import BodyModel, load_body_model
 from ..core.fit import FitModel
-from ..core.heading import Heading, heading_frame
+from ..core.heading import Heading, HeadingFrame, heading_frame
 from ..core.pipeline import (CoarseBase, CoarseFeatures, GarmentPair, coarse_base_points, coarse_model_features,
                              detail_model_inputs, pose_body, prepare_pair)
 from ..core.postprocess import nearest_vertex
@@ -227,8 +227,10 @@ class PhysicsClip:
     """Frame rate of the motion [1/s] (its ``MotionSpec.fps``); the dynamic objective's
     time step is ``1 / fps``."""
     target: np.ndarray | None = None
-    """(T, N, 3) float32 the hybrid objective's simulated target [m] (the simulation, or its
-    coarse target), in the frame of ``poses``; None: the sequence was not simulated."""
+    """(T', N, 3) float32 the hybrid objective's simulated target [m] (the simulation, or its
+    coarse target), in the frame of ``poses``: of every frame (T' = T), or of the first T' where
+    the simulation went unstable and the data set kept its frames before (``SimConfig.keep_partial``);
+    None: the sequence was not simulated."""
 
     @property
     def num_frames(self) -> int:
@@ -320,7 +322,9 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
         if Heading(heading) is Heading.CANONICAL:
             frame = heading_frame(poses, transl, pair.joints[0])
             poses = frame.canonical_poses(poses)
-            target = frame.to_canonical(target).astype(np.float32) if target is not None else None
+            if target is not None:  # a kept part of an unstable sequence covers its first frames only
+                first = HeadingFrame(frame.yaw[:len(target)], frame.pivot[:len(target)])
+                target = first.to_canonical(target).astype(np.float32)
         clips.append(PhysicsClip(name=job.name, split=split, pair=pair, rest=rest,
                                  rest_points=np.asarray(job.garment_vertices, dtype=np.float64),
                                  poses=np.asarray(poses, dtype=np.float64),
@@ -363,7 +367,8 @@ def _sim_entries(sim_data: Path, config_path: Path, jobs, material: Material) ->
 
 def _sim_frames(sim_data: Path, entry: dict, job, config_path: Path,
                 sim_target: CoarseTarget | str | None) -> np.ndarray:
-    """(T, N, 3) float32 a job's simulated target [m], world frame, every frame of the job.
+    """(T', N, 3) float32 a job's simulated target [m], world frame: every frame of the job, or its
+    first T' where the data set kept the part of an unstable sequence (``SimConfig.keep_partial``).
 
     Raises:
         ArgumentError: the shard is unreadable, or holds another sequence than ``job``.
@@ -380,8 +385,9 @@ def _sim_frames(sim_data: Path, entry: dict, job, config_path: Path,
         a, b = np.asarray(a), np.asarray(b)
         return a.shape == b.shape and np.allclose(a, b, rtol=0.0, atol=1e-9)
 
-    if not (same(shard.poses, job.poses) and same(shard.transl, job.transl) and same(shard.betas, job.betas)
-            and same(shard.garment_faces, job.garment_faces)):
+    frames = shard.poses.shape[0]
+    if not (same(shard.poses, job.poses[:frames]) and same(shard.transl, job.transl[:frames])
+            and same(shard.betas, job.betas) and same(shard.garment_faces, job.garment_faces)):
         raise ArgumentError(f"--sim-data {sim_data}: {path.name} holds another sequence than the one {config_path} "
                             f"plans as {job.name} (poses, body or garment differ: a data set of another config?)")
     if sim_target is None:
@@ -589,11 +595,23 @@ def _spring(clip: PhysicsClip, x_t: torch.Tensor, y: torch.Tensor, weight: float
 
 def _supervised(clip: PhysicsClip, x_t: torch.Tensor, t: np.ndarray, weight: float) -> torch.Tensor | None:
     """(B,) the hybrid objective's supervised term [J] at frames ``t`` (B,) of garments
-    ``x_t`` (B, N, 3) [m]: :func:`_spring` toward the clip's :attr:`~PhysicsClip.target`;
-    None for a clip without one."""
+    ``x_t`` (B, N, 3) [m]: :func:`_spring` toward the clip's :attr:`~PhysicsClip.target`, 0 at a
+    frame past the target's last (a kept part of an unstable sequence); None for a clip without
+    one, or where no frame of ``t`` has a target."""
+    have = _targeted(clip, t)
+    if have is None:
+        return None
+    t = np.minimum(np.asarray(t, dtype=np.int64), clip.target.shape[0] - 1)
+    term = _spring(clip, x_t, torch.from_numpy(clip.target[t]), weight)
+    return term * torch.from_numpy(have).to(term)
+
+
+def _targeted(clip: PhysicsClip, t: np.ndarray) -> np.ndarray | None:
+    """(B,) bool: which of frames ``t`` have a simulated target; None where none has."""
     if clip.target is None:
         return None
-    return _spring(clip, x_t, torch.from_numpy(clip.target[np.asarray(t, dtype=np.int64)]), weight)
+    have = np.asarray(t, dtype=np.int64) < clip.target.shape[0]
+    return have if have.any() else None
 
 
 @dataclass(frozen=True)
@@ -675,9 +693,10 @@ def _validate(model, step: _Tier, clips: Sequence[PhysicsClip], config: TrainCon
             term = _supervised(clip, x[now], t, weight) if weight is not None else None
             if term is not None:
                 supervised += float(term.sum())
-                y = torch.from_numpy(clip.target[np.asarray(t, dtype=np.int64)]).to(x)
-                sim_dist += float(torch.linalg.vector_norm(x[now] - y, dim=-1).sum())
-                sim_vertices += len(t) * x.shape[1]
+                have = _targeted(clip, t)
+                y = torch.from_numpy(clip.target[np.asarray(t, dtype=np.int64)[have]]).to(x)
+                sim_dist += float(torch.linalg.vector_norm(x[now][torch.from_numpy(have)] - y, dim=-1).sum())
+                sim_vertices += int(have.sum()) * x.shape[1]
             if anchor is not None:
                 x0 = anchor.garment(step, clip, win).cpu()
                 spring += float(anchor.term(clip, x[now], x0).sum())

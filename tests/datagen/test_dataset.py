@@ -209,3 +209,84 @@ def test_run_jobs_starts_nothing_after_its_deadline(tmp_path, body):
     assert one.calls == [40, 50, 60]  # a deadline not yet passed changes nothing
     with pytest.raises(DatasetError, match="batch must be at least 1"):
         run_jobs(_jobs(body), tmp_path, SimConfig(), body=body, batch=0)
+
+
+class LateFailSim:
+    """Stands in for the simulator: the rest garment, every frame stable until ``fail_at``, where
+    an edge stretches past the limit and the simulation stops (as Newton's does); counts calls."""
+
+    def __init__(self, fail_at: int):
+        self.fail_at, self.calls = fail_at, 0
+
+    def __call__(self, body, betas, verts, faces, poses, transl, config):
+        self.calls += 1
+        done = min(self.fail_at + 1, poses.shape[0])
+        pos = (verts[None] + np.arange(done)[:, None, None] * [0, 1e-3, 0]).astype(np.float32)
+        stable = np.arange(done) < self.fail_at
+        stretch = np.where(stable, 1.2, 1.7)
+        return SimResult(positions=pos, nan=np.zeros(done, bool), penetration=np.zeros(done),
+                         max_stretch=stretch, max_speed=np.zeros(done), stable=stable, frames_requested=poses.shape[0],
+                         failure=f"frame {self.fail_at}: edge stretch 1.7 > 1.6", device="cpu", seconds_per_frame=0.0)
+
+
+def _long_job(body, frames: int = 30):
+    job = _jobs(body)[0]
+    rng = np.random.default_rng(3)
+    return Job(name="long", garment_vertices=job.garment_vertices, garment_faces=job.garment_faces,
+               betas=np.zeros(10), poses=rng.normal(0, 0.1, (frames, 72)), transl=rng.normal(0, 0.1, (frames, 3)),
+               seed=0, meta={})
+
+
+def test_keep_partial_keeps_the_frames_before_an_unstable_one_and_only_those(tmp_path, body):
+    """``SimConfig.keep_partial``: a sequence that goes unstable at frame 20 of 30 (24 fps) keeps
+    its first 15 frames (0.2 s, 5 frames, before the failure) as a shard of those frames, where
+    at least ``keep_partial`` of them follow its warm-up; the setting is left out of the digest,
+    so turning it on simulates again only the sequence rejected before."""
+    from cloth_usd.datagen.simulate import PARTIAL_MARGIN_SECONDS, SimulationError
+
+    assert PARTIAL_MARGIN_SECONDS == 0.2
+    job = _long_job(body)
+    assert SimConfig(keep_partial=10).to_json() == SimConfig().to_json()
+    assert job.digest(SimConfig(keep_partial=10), DatasetConfig()) == job.digest(SimConfig(), DatasetConfig())
+    with pytest.raises(SimulationError, match="keep_partial"):
+        SimConfig(keep_partial=-1)
+
+    sim = LateFailSim(20)
+    manifest = run_jobs([job], tmp_path, SimConfig(), body=body, simulator=sim)
+    assert manifest.rejected == ["long"] and not (tmp_path / "long.npz").exists()
+    again = LateFailSim(20)
+    manifest = run_jobs([job], tmp_path, SimConfig(keep_partial=10), body=body, simulator=again)
+    assert again.calls == 1  # rejected whole before: simulated again for its frames
+    assert manifest.accepted == ["long"] and manifest.partial == ["long"] and manifest.rejected == []
+    entry = manifest.sequences["long"]
+    assert entry["partial"] == {"frames": 15, "frames_requested": 30, "failure": "frame 20: edge stretch 1.7 > 1.6"}
+    assert entry["quality"]["frames_done"] == 15 and entry["quality"]["max_stretch"] == pytest.approx(1.2)
+    shard = read_shard(tmp_path / "long.npz")
+    assert shard.positions.shape == (15, 40, 3) and shard.coarse.shape == (15, 40, 3)
+    np.testing.assert_array_equal(shard.poses, job.poses[:15])
+    np.testing.assert_array_equal(shard.transl, job.transl[:15])
+    assert shard.digest == job.digest(SimConfig(), DatasetConfig())
+    third = LateFailSim(20)
+    run_jobs([job], tmp_path, SimConfig(keep_partial=10), body=body, simulator=third)
+    assert third.calls == 0  # its shard is there
+
+    # too few frames left before the failure: rejected, and not simulated again for the same setting
+    short = tmp_path / "short"
+    first = LateFailSim(14)  # 9 frames before the margin
+    assert run_jobs([job], short, SimConfig(keep_partial=10), body=body, simulator=first).rejected == ["long"]
+    assert Manifest.read(short).sequences["long"]["keep_partial"] == 10
+    same = LateFailSim(14)
+    run_jobs([job], short, SimConfig(keep_partial=10), body=body, simulator=same)
+    assert same.calls == 0
+    fewer = LateFailSim(14)
+    assert run_jobs([job], short, SimConfig(keep_partial=9), body=body, simulator=fewer).partial == ["long"]
+    assert fewer.calls == 1 and read_shard(short / "long.npz").positions.shape[0] == 9
+
+    # the frames counted are those past the motion's warm-up, which training and evaluation leave out
+    import dataclasses
+
+    warm = dataclasses.replace(job, meta={"warmup_frames": 6})
+    assert run_jobs([warm], tmp_path / "warm", SimConfig(keep_partial=10), body=body,
+                    simulator=LateFailSim(20)).rejected == ["long"]  # 15 kept, 9 past the warm-up
+    assert run_jobs([warm], tmp_path / "warm5", SimConfig(keep_partial=9), body=body,
+                    simulator=LateFailSim(20)).partial == ["long"]

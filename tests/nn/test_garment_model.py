@@ -113,6 +113,33 @@ def test_newton_frames_of_a_training_sequence_pull_the_model_toward_them(own, tm
     assert physics_only["hybrid"] is None
 
 
+def test_a_target_of_the_first_frames_only_is_trained_on_those(own, tmp_path):
+    """A kept part of a sequence that went unstable in Newton (``SimConfig.keep_partial``) is a
+    target of its first frames: the supervised batches draw from those alone, and the model
+    comes toward the target there."""
+    import dataclasses
+
+    from cloth_usd.nn.garment_model import (GarmentModelConfig, _first, _garment, _prepared, load_garment_run,
+                                            train_garment_model)
+
+    root, body, data, *_ = own
+    first = data.split("train")[0]
+    kept = _first(first) + 4
+    assert kept < first.num_frames
+    skinned = _garment(None, _prepared([first])[0], np.arange(kept), body).numpy()
+    target = (skinned - [0.0, 0.02, 0.0]).astype(np.float32)
+    clips = tuple(dataclasses.replace(c, target=target) if c is first else c for c in data.clips)
+    cfg = GarmentModelConfig(steps=40, val_every=20, hidden=32, layers=2, bending_scale=10.0, lr=2e-2,
+                             supervised_share=1.0, supervised_weight=1e8)
+    info = train_garment_model(root / "data.json", tmp_path / "part", cfg, body=body,
+                               physics=dataclasses.replace(data, clips=clips))
+    assert info["hybrid"]["simulated_sequences"] == 1 and info["hybrid"]["simulated_frames"] == 4
+    net, _ = load_garment_run(tmp_path / "part")
+    with torch.no_grad():
+        moved = _garment(net, _prepared([first])[0], np.arange(_first(first), kept), body).numpy()
+    assert np.linalg.norm(moved - target[_first(first):], axis=-1).mean() < 0.5 * 0.02
+
+
 def test_the_coarse_model_can_learn_newtons_frames_smoothed_as_the_papers_coarse_tier(own, tmp_path):
     """sim_target taubin: the spring pulls toward Newton's frames with their wrinkles smoothed out
     (the paper's coarse ground truth); the detail tier refuses it, an unknown target is one line."""

@@ -153,7 +153,7 @@ def test_train_garment_of_the_garment_form_bakes_the_sample(tmp_path, capsys):
     hybrid = load_config(tmp_path / "own.work" / "hybrid.json")
     training = load_config(tmp_path / "own.work" / "data.json")
     assert hybrid.simulate_splits == ("train",) and hybrid.simulate_sequences == {"train": 12}
-    assert hybrid.sim == {**training.sim, "collider_faces": None, "self_contact": False}
+    assert hybrid.sim == {**training.sim, "collider_faces": None, "self_contact": False, "keep_partial": 15}
     assert [j.name for j in plan_jobs(hybrid)] == [j.name for j in plan_jobs(training)]
     # --coarse-target: the coarse model's spring pulls toward Newton's frames smoothed; the detail's, the frames
     tiers = {t: json.loads((tmp_path / "own.work" / f"{t}.json").read_text()) for t in ("coarse", "detail")}

@@ -173,3 +173,34 @@ def test_sim_data_of_another_config_is_refused_in_one_line(config_path, sim_data
     assert not (tmp_path / "run" / "run.json").exists()
     with pytest.raises(ArgumentError, match="--sim-data"):
         train_physics(config_path, tmp_path / "run", PHYSICS, device="cpu", sim_data=sim_data)
+
+
+def test_a_kept_part_of_an_unstable_sequence_is_the_target_of_its_first_frames(config_path, sim_data, tmp_path):
+    """A shard of a sequence's first frames (``SimConfig.keep_partial``) is that sequence's target
+    there, in the frame the models see as the whole one is; the supervised term is 0 past it."""
+    import shutil
+
+    from cloth_usd.core.shards import Manifest, read_shard, write_shard
+    from cloth_usd.nn.physics_train import _spring, _supervised
+
+    part = tmp_path / "part"
+    shutil.copytree(sim_data, part)
+    name = SIMULATED[0]
+    shard = read_shard(part / f"{name}.npz")
+    write_shard(part / f"{name}.npz", dataclasses.replace(
+        shard, **{k: getattr(shard, k)[:2] for k in ("positions", "coarse", "poses", "transl", "penetration",
+                                                     "max_stretch")}))
+    manifest = Manifest.read(part)
+    manifest.sequences[name]["partial"] = {"frames": 2, "frames_requested": shard.poses.shape[0], "failure": "test"}
+    manifest.write(part)
+    whole = {c.name: c for c in physics_set(config_path, splits=(Split.TRAIN,), max_frames=3,
+                                            sim_data=sim_data).clips}
+    cut = {c.name: c for c in physics_set(config_path, splits=(Split.TRAIN,), max_frames=3, sim_data=part).clips}
+    assert cut[name].target.shape[0] == 2 and whole[name].target.shape[0] == 3
+    np.testing.assert_allclose(cut[name].target, whole[name].target[:2], atol=1e-6)
+    x = torch.from_numpy(whole[name].target[[0, 1, 2]]).double() + 0.01
+    term = _supervised(cut[name], x, np.array([0, 1, 2]), 10.0)
+    full = _spring(cut[name], x, torch.from_numpy(whole[name].target), 10.0)
+    assert float(term[2]) == 0.0 and float(full[2]) > 0.0
+    torch.testing.assert_close(term[:2], full[:2], rtol=1e-5, atol=0.0)
+    assert _supervised(cut[name], x[2:], np.array([2]), 10.0) is None
