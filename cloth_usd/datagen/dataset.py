@@ -219,7 +219,8 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
 
     def record(job: Job, digest: str, path: Path, result: SimResult) -> None:
         entry = {"seed": int(job.seed), "digest": digest, "quality": result.quality(), "meta": job.meta}
-        part = result.partial(config.keep_partial, config.fps, warmup=int((job.meta or {}).get("warmup_frames", 0)))
+        warmup = int((job.meta or {}).get("warmup_frames", 0))
+        part = result.partial(config.keep_partial, config.fps, warmup=warmup)
         if result.is_stable:
             write_shard(path, make_shard(job, result, body, config, dataset, digest))
             entry.update(status="ok", shard=path.name)
@@ -231,7 +232,9 @@ def run_jobs(jobs: Iterable[Job], out_dir: str | Path, config: SimConfig = SimCo
                          partial={"frames": part.frames_done, "frames_requested": result.frames_requested,
                                   "failure": result.failure})
         else:
-            log.warning("%s: rejected (%s)", job.name, result.failure or "unstable")
+            kept = (f"; fewer than {config.keep_partial} frames before it follow the {warmup}-frame warm-up, "
+                    "nothing kept") if config.keep_partial else ""
+            log.warning("%s: rejected (%s%s)", job.name, result.failure or "unstable", kept)
             path.unlink(missing_ok=True)  # a stale shard of older inputs must not survive
             entry.update(status="rejected", shard=None)
             if config.keep_partial:

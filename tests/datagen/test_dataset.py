@@ -237,7 +237,7 @@ def _long_job(body, frames: int = 30):
                seed=0, meta={})
 
 
-def test_keep_partial_keeps_the_frames_before_an_unstable_one_and_only_those(tmp_path, body):
+def test_keep_partial_keeps_the_frames_before_an_unstable_one_and_only_those(tmp_path, body, caplog):
     """``SimConfig.keep_partial``: a sequence that goes unstable at frame 20 of 30 (24 fps) keeps
     its first 15 frames (0.2 s, 5 frames, before the failure) as a shard of those frames, where
     at least ``keep_partial`` of them follow its warm-up; the setting is left out of the digest,
@@ -286,7 +286,9 @@ def test_keep_partial_keeps_the_frames_before_an_unstable_one_and_only_those(tmp
     import dataclasses
 
     warm = dataclasses.replace(job, meta={"warmup_frames": 6})
-    assert run_jobs([warm], tmp_path / "warm", SimConfig(keep_partial=10), body=body,
-                    simulator=LateFailSim(20)).rejected == ["long"]  # 15 kept, 9 past the warm-up
+    with caplog.at_level("WARNING"):
+        assert run_jobs([warm], tmp_path / "warm", SimConfig(keep_partial=10), body=body,
+                        simulator=LateFailSim(20)).rejected == ["long"]  # 15 kept, 9 past the warm-up
+    assert "fewer than 10 frames before it follow the 6-frame warm-up, nothing kept" in caplog.text
     assert run_jobs([warm], tmp_path / "warm5", SimConfig(keep_partial=9), body=body,
                     simulator=LateFailSim(20)).partial == ["long"]
