@@ -18,6 +18,7 @@ import numpy as np
 from scipy import sparse
 
 from ..errors import ArgumentError
+from .mesh import vector_lengths
 from .postprocess import nearest_vertex
 from .smpl import NUM_JOINTS
 
@@ -74,7 +75,7 @@ def vertex_normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
     face_n = np.cross(b - a, c - a)  # (T, M, 3), |.| = 2 area
     summed = _incidence(faces, num_v) @ face_n.transpose(1, 0, 2).reshape(faces.shape[0], -1)
     summed = np.asarray(summed).reshape(num_v, num_t, 3).transpose(1, 0, 2)
-    length = np.linalg.norm(summed, axis=-1, keepdims=True)
+    length = vector_lengths(summed)[..., None]
     out = np.divide(summed, length, out=np.zeros_like(summed), where=length > 1e-20)
     return out[0] if single else out
 
@@ -155,7 +156,7 @@ def detail_features(coarse: np.ndarray, garment_faces: np.ndarray, posed_joints:
         raise ArgumentError(f"posed_joints must be (T, {NUM_JOINTS}, 3), got {joints.shape}")
     normals = vertex_normals(coarse, garment_faces)
     pos = coarse - np.asarray(transl, dtype=np.float64)[:, None, :]
-    dist = np.linalg.norm(coarse[:, :, None, :] - joints[:, None, :, :], axis=-1)  # (T, N, 24)
+    dist = vector_lengths(coarse[:, :, None, :] - joints[:, None, :, :])  # (T, N, 24)
     return np.concatenate([normals, pos, dist], axis=-1)
 
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import ArgumentError
+from .mesh import vector_lengths
 
 __all__ = ["GuardLimits", "FrameFaults", "check_frames"]
 
@@ -87,15 +88,15 @@ def check_frames(points: np.ndarray, skinned: np.ndarray, rest: np.ndarray, edge
     num_t = points.shape[0]
     finite = np.isfinite(points).all(axis=(1, 2))
     safe = np.where(finite[:, None, None], points, skinned)
-    distance = np.linalg.norm(safe - skinned, axis=-1)
+    distance = vector_lengths(safe - skinned)
     offset = distance.max(axis=1, initial=0.0)
     median = np.median(distance, axis=1) if distance.shape[1] else np.zeros(num_t)
     stretch = np.ones(num_t)
     if len(edges):
         a, b = edges[:, 0], edges[:, 1]
         rest_len = np.linalg.norm(rest[a] - rest[b], axis=-1)
-        ref = np.maximum(np.linalg.norm(skinned[:, a] - skinned[:, b], axis=-1), np.maximum(rest_len, limits.min_edge))
-        ratio = np.linalg.norm(safe[:, a] - safe[:, b], axis=-1) / ref
+        ref = np.maximum(vector_lengths(skinned[:, a] - skinned[:, b]), np.maximum(rest_len, limits.min_edge))
+        ratio = vector_lengths(safe[:, a] - safe[:, b]) / ref
         stretch = np.quantile(ratio, limits.stretch_quantile, axis=1)
     reasons = []
     for t in range(num_t):

@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import ArgumentError
 from .association import closest_point_on_triangles, incident_faces
+from .mesh import vector_lengths
 
 __all__ = ["push_out", "push_out_of_surface", "StrainLimiter", "check_strain_limit", "mesh_edges", "STRAIN_LIMIT",
            "STRAIN_ITERATIONS", "STRAIN_ANCHOR", "nearest_vertex", "nearest_body_points", "search_tree",
@@ -215,7 +216,7 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     flat = near + offset[:, None]
     q, bp, bn = p[frame, row], flat_b[flat], flat_n[flat] * found[..., None]
     s = np.einsum("rc,rc->r", q - bp[:, 0], bn[:, 0])
-    plane = (np.einsum("rc,rc->r", bn[:, 0], bn[:, 0]) > 0) & (np.linalg.norm(q - bp[:, 0], axis=1) <= plane_reach)
+    plane = (np.einsum("rc,rc->r", bn[:, 0], bn[:, 0]) > 0) & (vector_lengths(q - bp[:, 0]) <= plane_reach)
     push = np.where(plane, np.maximum(margin - s, 0.0), 0.0)
     q += push[:, None] * bn[:, 0]
     hit = push > 0
@@ -253,7 +254,7 @@ def _closest_surface(q: np.ndarray, offset: np.ndarray, near: np.ndarray, found:
     slot[r, c] = np.arange(r.size)
     pick = slot[np.arange(q.shape[0]), np.argmin(d2, axis=1)]
     normal = np.einsum("ik,ikc->ic", bary[pick], normals[corners[pick]])
-    length = np.linalg.norm(normal, axis=1, keepdims=True)
+    length = vector_lengths(normal)[:, None]
     return closest[pick], np.divide(normal, length, out=np.zeros_like(normal), where=length > 0)
 
 
@@ -390,7 +391,7 @@ class StrainLimiter:
         with self._blas.limit(limits=1, user_api="blas"):
             for _ in range(self.iterations):
                 d = (self._d @ x).reshape(m, frames, 3)
-                length = np.linalg.norm(d, axis=2)
+                length = vector_lengths(d)
                 if not (length > self._longest).any():
                     break
                 d *= (np.minimum(length, self._longest) / np.maximum(length, 1e-12))[..., None]
@@ -413,7 +414,7 @@ def limit_slides(points: np.ndarray, limited: np.ndarray) -> np.ndarray:
     more than :data:`LIMIT_MOVE_BOUND` at the :data:`LIMIT_CHECK_QUANTILE` of its vertices' moves: a
     region slid along the body, not a spike pulled back (:func:`~cloth_usd.core.pipeline.post_process`
     pushes such a frame without the limit)."""
-    move = np.linalg.norm(np.asarray(limited) - np.asarray(points), axis=-1)
+    move = vector_lengths(np.asarray(limited) - np.asarray(points))
     return np.quantile(move, LIMIT_CHECK_QUANTILE, axis=1) > LIMIT_MOVE_BOUND
 
 

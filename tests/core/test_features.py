@@ -100,3 +100,20 @@ def test_attributes():
     np.testing.assert_array_equal(a[:, 13:], poses)
     with pytest.raises(ArgumentError, match="alpha"):
         attributes(np.zeros(2), np.zeros(10), poses)
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("shape", [(7, 3), (2, 5, 3), (3, 4, 24, 3), (0, 3)])
+def test_vector_lengths_are_numpys_norms(dtype, shape):
+    """The lengths the post-process, the features and the guard take, component by component:
+    numpy's norm over the last axis, in the input's dtype (a zero vector has length 0)."""
+    from cloth_usd.core.mesh import vector_lengths
+
+    v = np.random.default_rng(4).normal(0, 0.3, shape).astype(dtype)
+    if v.size:
+        v.reshape(-1, 3)[0] = 0.0
+    out = vector_lengths(v)
+    assert out.shape == shape[:-1] and out.dtype == dtype
+    np.testing.assert_allclose(out, np.linalg.norm(v, axis=-1), rtol=2e-7 if dtype == np.float64 else 2e-6)
+    if v.size:
+        assert out.reshape(-1)[0] == 0.0
