@@ -337,9 +337,9 @@ def _datagen(args: argparse.Namespace) -> int:
         failure = (manifest.sequences[first].get("quality") or {}).get("failure") or "unstable"
         raise SimulationError(f"{args.config}: every sequence was rejected as unstable ({first}: {failure}); where "
                               "a hand, an elbow or a raised knee presses into the cloth Newton's own cloth can stretch "
-                              "past the config's sim.max_stretch (1.6 unless set): raise it there to keep them (then look at "
-                              "them: a garment can leave the body), or set sim.keep_partial to keep their frames "
-                              "before it")
+                              "past the config's sim.max_stretch (1.6 unless set): raise it there to keep them (then "
+                              "look at them: a garment can leave the body), or set sim.keep_partial to keep their "
+                              "frames before it")
     return 0
 
 
