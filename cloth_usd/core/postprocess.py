@@ -406,7 +406,7 @@ class StrainLimiter:
         if not len(self.edges):
             return np.ones(p.shape[0])
         d = p[:, self.edges[:, 1]] - p[:, self.edges[:, 0]]
-        return np.quantile(np.sqrt(np.einsum("tec,tec->te", d, d)) * self._per_rest, quantile, axis=1)
+        return np.quantile(vector_lengths(d) * self._per_rest, quantile, axis=1)
 
 
 def limit_slides(points: np.ndarray, limited: np.ndarray) -> np.ndarray:
