@@ -65,7 +65,7 @@ def test_the_physics_configs_plan_and_load():
 def test_the_experiment_configs_change_one_thing_from_what_they_measure_against():
     """The shape part of the test set is the test set's own unseen-body and unseen-shirt
     sequences; the corner-bodies and more-clips data configs of the T-shirt differ from
-    ``tshirt-v6``'s in what their names say (README, "Tried after tshirt-v6")."""
+    ``tshirt-v6``'s in what their names say (docs/models.md, "Tried after tshirt-v6")."""
     def read(name):
         return json.loads((CONFIGS / name).read_text())
 
@@ -78,7 +78,7 @@ def test_the_experiment_configs_change_one_thing_from_what_they_measure_against(
     assert base.pop("bodies") != [] and corners == base
     motions = more.pop("train_motions")
     assert motions[:len(base["train_motions"])] == base["train_motions"] and len(motions) == 55
-    held_out = {m["bvh"] for m in base["test_motions"]} | {  # and the README's other held-out clips
+    held_out = {m["bvh"] for m in base["test_motions"]} | {  # and docs/models.md's other held-out clips
         "cmu-mb2_chrystianosaraujo-motion-viewer/02/02_03.bvh", "cmu-daz_papagina-acLSTM/martial/04.bvh",
         "cmu-daz_papagina-acLSTM/martial/10.bvh", "cmu-daz_papagina-acLSTM/indian/13.bvh"}
     assert not {m.get("bvh") for m in motions} & held_out

@@ -8,7 +8,7 @@ vertex's mirror image on its rest surface (barycentric on the nearest triangle).
 shirt, fitted to Newton's 52 simulated sequences alone, their mirror images took 0.75 mm off the
 error on its Newton test set on each of two seeds (``bench/bench_sim_scaling.py --mirror``), about
 what a second 52 simulated sequences would give; in the hybrid training of the shipped bundle they
-took 0.93 mm off the unseen body and put 0.22 mm on the unseen motions (README, "Fifty-two simulated
+took 0.93 mm off the unseen body and put 0.22 mm on the unseen motions (docs/models.md, "Fifty-two simulated
 sequences and their mirror images"). A garment that is not symmetric (its
 mirror image more than :data:`SYMMETRY_TOLERANCE` from its surface) is refused: mirroring would
 teach it another garment.

@@ -90,7 +90,7 @@ FORMS = ("garment", "paper")
 @dataclass(frozen=True)
 class OwnGarmentPlan:
     """How much training a user's garment gets; the defaults fit about 25 minutes of a
-    2-core CPU for a 3500-vertex shirt (see the README)."""
+    2-core CPU for a 3500-vertex shirt (see docs/models.md)."""
 
     coarse_epochs: int = 8
     """Epochs of the coarse model (``max_batches`` batches each)."""

@@ -33,8 +33,9 @@ objective for a per-frame model. The history is detached by default: then a mini
 loss satisfies the implicit Euler step ``m (x_t - 2 x_{t-1} + x_{t-2}) / h^2 = -grad E(x_t)``
 at every frame, the equation of motion. Backpropagated through, a minimum also answers for
 each frame's part in the next two frames' inertia: the summed squared accelerations of the
-clip are smoothed, which is not the equation of motion. (Measured on the README's probe,
-the inertia there is 1e-5 of the energy and the two gradients differ by 2e-5 of their norm.)
+clip are smoothed, which is not the equation of motion. (Measured on the probe of docs/models.md,
+"Training on the garment's physics", the inertia there is 1e-5 of the energy and the two
+gradients differ by 2e-5 of their norm.)
 The clip's frame rate is its motion's (``MotionSpec.fps``); frames before ``t = 2`` and a
 clip's warm-up are never ``t``.
 
@@ -116,7 +117,7 @@ class ContactPoints(str, enum.Enum):
     garment the objective sees, as HOOD and SNUG do). The default: measured on the Newton test
     set, Newton's own garment is then near a minimum (4-10 J a frame against skinning's
     2500-3000), where with ``associated`` it scored 15,000-73,000 J, ten to thirty times
-    worse than skinning (README, ``bench/bench_energy_minimum.py``)."""
+    worse than skinning (docs/models.md, ``bench/bench_energy_minimum.py``)."""
     ASSOCIATED = "associated"
     """The vertex's own associated body vertex, fixed from the rest pose (tshirt-v4's
     objective): a vertex that slides along the body is measured against the plane of a body

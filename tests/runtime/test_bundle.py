@@ -238,7 +238,7 @@ def _assert_shipped_evaluation(bundle) -> None:
 
 def test_the_shipped_tshirt_bundle_verifies_and_records_its_evaluation():
     """The default T-shirt bundle (models/bundles/defaults.json) travels with the evaluation the
-    README quotes, measured on its own ONNX files, and lost no frame to the guard on the
+    README and docs/models.md quote, measured on its own ONNX files, and lost no frame to the guard on the
     held-out real clips it records (issue #12)."""
     from cloth_usd.runtime.bundle import default_bundle_dir, find_bundle
 
