@@ -15,6 +15,7 @@ from ..core.frames import CanonicalMotion
 from ..core.graph import directed_edges
 from ..core.guard import GuardLimits, check_frames
 from ..core.limits import BETA_LIMIT, BETA_MARGIN, betas_outside, betas_outside_range, pose_outliers
+from ..core.mesh import vector_lengths
 from ..core.plausibility import body_notes
 from ..core.provenance import GarmentReport
 from ..core.scene import Character, Garment, Tier
@@ -168,14 +169,14 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
                                            f"garment ({why}); --strict refuses it and nothing was written. Bake "
                                            "without --strict to replace such frames by a safer tier")
                     fallbacks.append((float(times[lo + i]), replaced_by, why))
-                max_off = max(max_off, float(np.linalg.norm(pts - skinned, axis=-1).max(initial=0.0)))
+                max_off = max(max_off, float(vector_lengths(pts - skinned).max(initial=0.0)))
                 moved += int(frames.moved.sum())
             bad = ~np.isfinite(pts).all(axis=(1, 2))
             if bad.any():
                 raise GarmentError(f"{where}: the deformed points are not finite at frame "
                                    f"{times[lo + int(np.argmax(bad))]:g} (tier {tier.value}); nothing "
                                    "was written. Check the skeleton's animation at that frame")
-            disp = np.linalg.norm(pts - transl[lo:hi, None, :] - binding.rest_points, axis=-1)
+            disp = vector_lengths(pts - transl[lo:hi, None, :] - binding.rest_points)
             max_disp = max(max_disp, float(disp.max()))
             m = to_prim[lo:hi]
             local = np.einsum("tab,tnb->tna", m[:, :3, :3], pts) + m[:, None, :3, 3]

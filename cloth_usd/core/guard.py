@@ -94,7 +94,7 @@ def check_frames(points: np.ndarray, skinned: np.ndarray, rest: np.ndarray, edge
     stretch = np.ones(num_t)
     if len(edges):
         a, b = edges[:, 0], edges[:, 1]
-        rest_len = np.linalg.norm(rest[a] - rest[b], axis=-1)
+        rest_len = vector_lengths(rest[a] - rest[b])
         ref = np.maximum(vector_lengths(skinned[:, a] - skinned[:, b]), np.maximum(rest_len, limits.min_edge))
         ratio = vector_lengths(safe[:, a] - safe[:, b]) / ref
         stretch = np.quantile(ratio, limits.stretch_quantile, axis=1)
