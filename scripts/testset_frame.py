@@ -2,13 +2,15 @@
 for a side-by-side close-up (``scripts/render_tiers.py --frame-file``).
 
     .venv/bin/python scripts/testset_frame.py DATA SEQUENCE FRAME -o FRAME.npz \\
-        [--bundle models/bundles/tshirt-v6 [--bundle B2 ...]] [--tiers coarse,detail]
+        [--bundle models/bundles/tshirt-v6 [--bundle B2 ...]] [--tiers coarse,detail] [--repeat DATA2]
 
 DATA is a ``cloth-usd datagen`` folder (the test set), SEQUENCE a name from its manifest (or a
 unique part of one), FRAME an evaluated frame (after the warm-up, as ``cloth-usd evaluate``
 counts). The file holds the posed body and, per panel, the garment points (skinning, each
 bundle's tiers, Newton; with several bundles a panel is named after its bundle and tier); the
-script prints each panel's error against Newton at that frame.
+script prints each panel's error against Newton at that frame. ``--repeat`` adds a last panel,
+"Newton, again": the same sequence of a second simulation of the test set config
+(``bench/bench_newton_repeat.py``).
 """
 
 from __future__ import annotations
@@ -37,6 +39,7 @@ def main(argv: list[str]) -> int:
     ap.add_argument("-o", "--output", required=True)
     ap.add_argument("--bundle", action="append", help="a bundle (repeatable; default models/bundles/tshirt-v6)")
     ap.add_argument("--tiers", default="coarse,detail", help="the learned tiers to show (default coarse,detail)")
+    ap.add_argument("--repeat", help="a second simulation of the same config: its frame is a last panel")
     args = ap.parse_args(argv)
     bundles = args.bundle or [str(Path(__file__).resolve().parents[1] / "models/bundles/tshirt-v6")]
 
@@ -61,6 +64,11 @@ def main(argv: list[str]) -> int:
             label = tier if len(bundles) == 1 else f"{bundle.name} {tier}"
             panels[label] = learned.evaluate(tier, clip.poses[:t + 1], clip.transl[:t + 1]).points[-1]
     panels["Newton"] = clip.positions[t].astype(np.float64)
+    if args.repeat:
+        twin = [c for c in load_dataset(args.repeat, body=body).clips if c.name == clip.name]
+        if not twin or not np.allclose(twin[0].poses, clip.poses):
+            raise SystemExit(f"--repeat {args.repeat}: no sequence {clip.name} of the same motion")
+        panels["Newton, again"] = twin[0].positions[t].astype(np.float64)
     for label, pts in panels.items():
         err = np.linalg.norm(pts - panels["Newton"], axis=1) * 1000.0
         print(f"{label:9s} mean {err.mean():6.2f} mm  p95 {np.percentile(err, 95):6.2f} mm")

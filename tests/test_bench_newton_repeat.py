@@ -1,0 +1,85 @@
+"""bench/bench_newton_repeat.py on the tiny data set and a copy of it whose garments are moved by a known step.
+
+The data set is the factory's on the tiny config with the fake simulator of
+``tests/nn/train_data.py``; the "repeat" is its copy with every simulated vertex 4 mm further
+along x, so the gap between the runs is 4 mm exactly and the floor 2 mm.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib.util
+import json
+import shutil
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+STEP_M = 0.004
+
+
+def _module(name: str, path: Path):
+    if name not in sys.modules:
+        spec = importlib.util.spec_from_file_location(name, path)
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[name] = module
+        spec.loader.exec_module(module)
+    return sys.modules[name]
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    from cloth_usd.core.shards import read_shard, write_shard
+
+    train_data = _module("train_data", ROOT / "tests" / "nn" / "train_data.py")
+    data = train_data.tiny_dataset(tmp_path_factory)
+    again = tmp_path_factory.mktemp("repeat") / "again"
+    shutil.copytree(data, again)
+    for path in again.glob("*.npz"):
+        if path.name == "fit.npz":
+            continue
+        shard = read_shard(path)
+        write_shard(path, dataclasses.replace(shard, positions=shard.positions + np.float32([STEP_M, 0.0, 0.0])))
+    return data, again
+
+
+def _bench():
+    return _module("bench_newton_repeat", ROOT / "bench" / "bench_newton_repeat.py")
+
+
+def test_gap_and_floor_of_a_known_step(runs, tmp_path, capsys):
+    data, again = runs
+    assert _bench().main(["--data", str(data), "--repeat", str(again), "--out", str(tmp_path)]) == 0
+    report = json.loads((tmp_path / "newton_repeat.json").read_text())
+    total = report["total"]
+    assert total["sequences"] >= 2  # the tiny set's unseen body, shirt and motion
+    assert total["gap_mm"] == pytest.approx(1000 * STEP_M, rel=1e-3)
+    assert total["floor_mm"] == pytest.approx(500 * STEP_M, rel=1e-3)
+    assert total["floor_over_skinning"] == pytest.approx(total["floor_mm"] / total["skinning_mm"])
+    for row in report["sequences"]:
+        assert row["gap_first_quarter_mm"] == pytest.approx(1000 * STEP_M, rel=1e-3)
+        assert row["gap_last_quarter_mm"] == pytest.approx(1000 * STEP_M, rel=1e-3)
+    assert "Floor: no model averages less than" in (tmp_path / "newton_repeat.md").read_text()
+
+
+def test_a_run_against_itself_has_no_floor(runs, tmp_path):
+    data, _ = runs
+    assert _bench().main(["--data", str(data), "--repeat", str(data), "--out", str(tmp_path)]) == 0
+    total = json.loads((tmp_path / "newton_repeat.json").read_text())["total"]
+    assert total["gap_mm"] == 0.0 and total["floor_mm"] == 0.0 and total["skinning_mm"] > 0
+
+
+def test_other_motions_under_the_same_name_are_refused(runs, tmp_path):
+    from cloth_usd.core.shards import read_shard, write_shard
+
+    data, again = runs
+    other = tmp_path / "other"
+    shutil.copytree(again, other)
+    path = next(p for p in sorted(other.glob("test_*.npz")))
+    shard = read_shard(path)
+    write_shard(path, dataclasses.replace(shard, poses=shard.poses + 0.1))
+    with pytest.raises(SystemExit, match="different motions"):
+        _bench().main(["--data", str(data), "--repeat", str(other), "--out", str(tmp_path / "out")])
