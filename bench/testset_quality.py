@@ -3,11 +3,15 @@
 For each split: sequences kept and rejected, evaluated frames (after each clip's warm-up),
 the fraction of garment vertices inside the body (mean over frames, and the worst frame),
 edge stretch against the rest garment (the median frame's 99th percentile, and the
-largest edge of any frame), the simulation's seconds per frame; then the per-frame error
-floor of the held poses (:func:`cloth_usd.datagen.floor.floor_report`). Writes
-``OUT/quality.md`` and ``OUT/quality.json`` (also printed).
+largest edge of any frame), the simulation's seconds per frame; then the sequences whose
+cloth lies furthest from the skinned garment (the largest vertex distance of any evaluated frame,
+and that frame): those checks are of a simulation's numbers, and a trouser leg that slid off a
+thigh passes them, so these are the frames to look at first (``scripts/testset_frame.py DATA
+SEQUENCE FRAME`` and ``scripts/render_tiers.py --frame-file``); then the per-frame error floor of
+the held poses (:func:`cloth_usd.datagen.floor.floor_report`). Writes ``OUT/quality.md`` and
+``OUT/quality.json`` (also printed).
 
-Run: python bench/testset_quality.py DATA [--out DATA/report]
+Run: python bench/testset_quality.py DATA [--out DATA/report] [--furthest 8]
 """
 
 from __future__ import annotations
@@ -20,14 +24,33 @@ from pathlib import Path
 import numpy as np
 
 from cloth_usd.core.shards import Manifest, read_shard
+from cloth_usd.core.skinning import skin_garment
 from cloth_usd.datagen.floor import FLOOR_SPLIT, floor_report
 from cloth_usd.datagen.simulate import edge_ratios, unique_edges
+from cloth_usd.nn.data import load_dataset
+
+
+def furthest_from_skinning(root: Path) -> list[dict]:
+    """Every kept sequence's largest vertex distance from the skinned garment [mm] over its evaluated
+    frames, the frame (as ``cloth-usd evaluate`` counts them) and that frame's mean, furthest first."""
+    data = load_dataset(root, [s for s in {e.get("meta", {}).get("split") or e.get("split")
+                                           for e in Manifest.read(root).sequences.values()}
+                               if s and s != FLOOR_SPLIT])
+    rows = []
+    for clip in data.clips:
+        skinned = skin_garment(clip.pair.binding, clip.poses, clip.transl, data.body.parents)
+        err = 1000.0 * np.linalg.norm(skinned - clip.positions.astype(np.float64), axis=-1)
+        t = int(err.max(axis=1).argmax())
+        rows.append({"sequence": clip.name, "frame": t, "max_mm": float(err[t].max()),
+                     "frame_mean_mm": float(err[t].mean()), "sequence_mean_mm": float(err.mean())})
+    return sorted(rows, key=lambda r: -r["max_mm"])
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("data", help="a cloth-usd datagen folder")
     ap.add_argument("--out", help="report folder (default: DATA/report)")
+    ap.add_argument("--furthest", type=int, default=8, help="sequences listed furthest from skinning (default 8)")
     args = ap.parse_args(argv)
     root = Path(args.data)
     out = Path(args.out) if args.out else root / "report"
@@ -66,6 +89,7 @@ def main(argv=None) -> int:
                      "stretch_p99_median_frame": float(np.median(a["stretch_p99"])) if a["stretch_p99"] else 0.0,
                      "stretch_max": float(max(a["stretch_max"], default=0.0)),
                      "s_per_frame_median": float(np.nanmedian(a["s_per_frame"])) if a["s_per_frame"] else 0.0})
+    furthest = furthest_from_skinning(root) if any(r["kept"] for r in rows) else []
     floor = floor_report(root)
     lines = ["| split | kept | rejected | evaluated frames | vertices | inside body: mean / worst frame | "
              "stretch: median frame's p99 / max | s/frame |", "|---|---:|---:|---:|---:|---:|---:|---:|"]
@@ -74,6 +98,13 @@ def main(argv=None) -> int:
                      f"{r['vertices'][0]}-{r['vertices'][1]} | {100 * r['penetration_mean']:.2f}% / "
                      f"{100 * r['penetration_worst_frame']:.2f}% | {r['stretch_p99_median_frame']:.3f} / "
                      f"{r['stretch_max']:.2f} | {r['s_per_frame_median']:.2f} |")
+    if furthest:
+        lines += ["", f"Furthest from the skinned garment ({min(args.furthest, len(furthest))} of {len(furthest)} "
+                  "sequences; look at these frames first):", "",
+                  "| sequence | frame | largest mm | that frame's mean mm | sequence mean mm |",
+                  "|---|---:|---:|---:|---:|"]
+        lines += [f"| {f['sequence']} | {f['frame']} | {f['max_mm']:.1f} | {f['frame_mean_mm']:.1f} | "
+                  f"{f['sequence_mean_mm']:.1f} |" for f in furthest[:args.furthest]]
     if floor:
         lines += ["", "Per-frame error floor (moving garment against the same pose held until settled):", "",
                   "| sequence | frame | mean mm | p95 mm | max mm | last held step mm |", "|---|---:|---:|---:|---:|---:|"]
@@ -82,7 +113,8 @@ def main(argv=None) -> int:
         lines += ["", f"All held frames: mean {floor['mean_mm']:.2f} mm, p95 {floor['p95_mm']:.2f} mm."]
     text = "\n".join(lines) + "\n"
     (out / "quality.md").write_text(text)
-    (out / "quality.json").write_text(json.dumps({"splits": rows, "floor": floor}, indent=1))
+    (out / "quality.json").write_text(json.dumps({"splits": rows, "furthest_from_skinning": furthest,
+                                                        "floor": floor}, indent=1))
     print(text)
     return 0
 

@@ -1,4 +1,5 @@
-"""bench/bench_newton_repeat.py on the tiny data set and a copy of it whose garments are moved by a known step.
+"""bench/bench_newton_repeat.py on the tiny data set and a copy of it whose garments are moved by a known step,
+and bench/testset_quality.py's sequences furthest from skinning on a copy with one vertex moved far off.
 
 The data set is the factory's on the tiny config with the fake simulator of
 ``tests/nn/train_data.py``; the "repeat" is its copy with every simulated vertex 4 mm further
@@ -83,3 +84,28 @@ def test_other_motions_under_the_same_name_are_refused(runs, tmp_path):
     write_shard(path, dataclasses.replace(shard, poses=shard.poses + 0.1))
     with pytest.raises(SystemExit, match="different motions"):
         _bench().main(["--data", str(data), "--repeat", str(other), "--out", str(tmp_path / "out")])
+
+
+def test_quality_report_lists_the_sequence_whose_cloth_left_the_skinned_garment_first(runs, tmp_path):
+    """bench/testset_quality.py: one vertex of one frame moved 30 cm off puts its sequence first, at that frame."""
+    from cloth_usd.core.shards import Manifest, read_shard, write_shard
+
+    data, _ = runs
+    broken = tmp_path / "broken"
+    shutil.copytree(data, broken)
+    manifest = Manifest.read(broken)
+    name = sorted(n for n, e in manifest.sequences.items() if e.get("status") == "ok")[0]
+    path = broken / manifest.sequences[name]["shard"]
+    shard = read_shard(path)
+    positions = shard.positions.copy()
+    positions[2, 7] += np.float32([0.0, 0.3, 0.0])  # a procedural motion: no warm-up, frame 2 is evaluated frame 2
+    write_shard(path, dataclasses.replace(shard, positions=positions))
+    quality = _module("testset_quality", ROOT / "bench" / "testset_quality.py")
+    assert quality.main([str(broken), "--out", str(tmp_path / "q"), "--furthest", "3"]) == 0
+    report = json.loads((tmp_path / "q" / "quality.json").read_text())
+    furthest = report["furthest_from_skinning"]
+    assert len(furthest) == sum(r["kept"] for r in report["splits"])
+    assert furthest[0]["sequence"] == name and furthest[0]["frame"] == 2
+    assert furthest[0]["max_mm"] > 250 and furthest[1]["max_mm"] < 50  # the stand-in's ripples: a few mm
+    assert [f["max_mm"] for f in furthest] == sorted((f["max_mm"] for f in furthest), reverse=True)
+    assert "look at these frames first" in (tmp_path / "q" / "quality.md").read_text()
