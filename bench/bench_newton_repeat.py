@@ -58,7 +58,10 @@ def main(argv: list[str] | None = None) -> int:
         raise SystemExit(f"--repeat {args.repeat}: no sequence of the same name as one of --data {args.data}")
     bundles = [load_bundle(b) for b in args.bundle]
     reads = {b.name: garment_reads(b, first.clips) for b in bundles}
-    rows, sums = [], {}
+    rows: list[dict] = []
+    gap_sum = skin_sum = 0.0
+    count = 0
+    tier_sums: dict[str, dict[str, float]] = {}  # label -> summed mm against A, B and their mean, and a count
     for a, b in pairs:
         if a.poses.shape != b.poses.shape or not np.allclose(a.poses, b.poses) or \
                 not np.allclose(a.transl, b.transl):
@@ -72,12 +75,9 @@ def main(argv: list[str] | None = None) -> int:
                "gap_p95_mm": float(np.percentile(gap, 95)), "gap_first_quarter_mm": float(gap[:quarter].mean()),
                "gap_last_quarter_mm": float(gap[-quarter:].mean()), "skinning_mm": float(_mm(skinned, truth_a).mean()),
                "tiers": {}}
-        count = gap.size
-        sums.setdefault("gap", 0.0)
-        sums["gap"] += gap.sum()
-        sums.setdefault("skinning", 0.0)
-        sums["skinning"] += _mm(skinned, truth_a).sum()
-        sums["count"] = sums.get("count", 0) + count
+        gap_sum += gap.sum()
+        skin_sum += _mm(skinned, truth_a).sum()
+        count += gap.size
         for bundle in bundles:
             if bundle.garment is not None and not bundle.garment.serves(len(a.rest_points), a.pair.faces):
                 continue  # a garment's own bundle serves its garment alone
@@ -87,25 +87,23 @@ def main(argv: list[str] | None = None) -> int:
                 err = {"A": _mm(pts, truth_a), "B": _mm(pts, truth_b), "mean": _mm(pts, mean)}
                 label = f"{bundle.name} {tier}"
                 row["tiers"][label] = {k: float(v.mean()) for k, v in err.items()}
-                acc = sums.setdefault(label, {"A": 0.0, "B": 0.0, "mean": 0.0, "count": 0})
+                acc = tier_sums.setdefault(label, {"A": 0.0, "B": 0.0, "mean": 0.0, "count": 0})
                 for k, v in err.items():
                     acc[k] += v.sum()
-                acc["count"] += count
+                acc["count"] += gap.size
         rows.append(row)
         print(f"{a.name}: |A - B| {row['gap_mm']:.2f} mm (first quarter {row['gap_first_quarter_mm']:.2f}, last "
               f"{row['gap_last_quarter_mm']:.2f}), skinning {row['skinning_mm']:.2f}; "
               + ", ".join(f"{k} {v['A']:.2f}/{v['B']:.2f}/{v['mean']:.2f}" for k, v in row["tiers"].items()),
               flush=True)
-    skin = sums["skinning"] / sums["count"]
-    gap = sums["gap"] / sums["count"]
+    skin, gap = skin_sum / count, gap_sum / count
     total = {"sequences": len(rows), "gap_mm": gap, "floor_mm": gap / 2, "skinning_mm": skin,
              "floor_over_skinning": gap / 2 / skin, "tiers": {}}
-    for label, acc in sums.items():
-        if isinstance(acc, dict):
-            t = {k: acc[k] / acc["count"] for k in ("A", "B", "mean")}
-            t["over_skinning"] = t["A"] / skin
-            t["two_runs_over_floor"] = 0.5 * (t["A"] + t["B"]) / (gap / 2)
-            total["tiers"][label] = t
+    for label, acc in tier_sums.items():
+        t = {k: acc[k] / acc["count"] for k in ("A", "B", "mean")}
+        t["over_skinning"] = t["A"] / skin
+        t["two_runs_over_floor"] = 0.5 * (t["A"] + t["B"]) / (gap / 2) if gap > 0 else None
+        total["tiers"][label] = t
     lines = ["| sequence | frames | A - B: mean (p95) | first / last quarter | skinning - A |"
              + "".join(f" {k}: - A / - B / - mean |" for k in total["tiers"]),
              "|---|---:|---:|---:|---:|" + "---:|" * len(total["tiers"])]
@@ -119,7 +117,8 @@ def main(argv: list[str] | None = None) -> int:
     lines += ["", f"Floor: no model averages less than |A - B| / 2 = {gap / 2:.2f} mm over the two runs, "
               f"{gap / 2 / skin:.3f} x skinning's error against A."]
     lines += [f"- {k}: {t['over_skinning']:.3f} x skinning against A; its mean over the two runs "
-              f"{t['two_runs_over_floor']:.2f} x the floor" for k, t in total["tiers"].items()]
+              + (f"{t['two_runs_over_floor']:.2f} x the floor" if t["two_runs_over_floor"] is not None else
+                 "over a floor of 0 (the two runs are the same)") for k, t in total["tiers"].items()]
     text = "\n".join(lines) + "\n"
     print(text)
     out = Path(args.out)
