@@ -9,33 +9,22 @@ along x, so the gap between the runs is 4 mm exactly and the floor 2 mm.
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
 import shutil
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from script_module import ROOT, load_script
+
 STEP_M = 0.004
-
-
-def _module(name: str, path: Path):
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
 
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     from cloth_usd.core.shards import read_shard, write_shard
 
-    train_data = _module("train_data", ROOT / "tests" / "nn" / "train_data.py")
+    train_data = load_script("train_data", ROOT / "tests" / "nn" / "train_data.py")
     data = train_data.tiny_dataset(tmp_path_factory)
     again = tmp_path_factory.mktemp("repeat") / "again"
     shutil.copytree(data, again)
@@ -48,7 +37,7 @@ def runs(tmp_path_factory):
 
 
 def _bench():
-    return _module("bench_newton_repeat", ROOT / "bench" / "bench_newton_repeat.py")
+    return load_script("bench_newton_repeat", ROOT / "bench" / "bench_newton_repeat.py")
 
 
 def test_gap_and_floor_of_a_known_step(runs, tmp_path, capsys):
@@ -100,7 +89,7 @@ def test_quality_report_lists_the_sequence_whose_cloth_left_the_skinned_garment_
     positions = shard.positions.copy()
     positions[2, 7] += np.float32([0.0, 0.3, 0.0])  # a procedural motion: no warm-up, frame 2 is evaluated frame 2
     write_shard(path, dataclasses.replace(shard, positions=positions))
-    quality = _module("testset_quality", ROOT / "bench" / "testset_quality.py")
+    quality = load_script("testset_quality", ROOT / "bench" / "testset_quality.py")
     assert quality.main([str(broken), "--out", str(tmp_path / "q"), "--furthest", "3"]) == 0
     report = json.loads((tmp_path / "q" / "quality.json").read_text())
     furthest = report["furthest_from_skinning"]

@@ -7,28 +7,18 @@ with the fake simulator of ``tests/nn/train_data.py``.
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
+from script_module import ROOT, load_script
+
 SMALL = {"shirts": 2, "test_shirts": [], "bodies": ["short_thin", "tall_fat"], "test_bodies": [],
          "garment_vertices": 300, "max_frames": 2, "train_motions": [{"kind": "walk", "seconds": 1.0, "seed": 0}],
          "test_motions": [{"kind": "dance", "seconds": 1.0, "seed": 5}],
          "sim": {"substeps": 2, "iterations": 2, "collider_faces": 2000}}
-
-
-def _module(name: str, path: Path):
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, path)
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module  # before exec: dataclasses look their module up
-        spec.loader.exec_module(module)
-    return sys.modules[name]
 
 
 def _linear_model(path: Path, inputs: tuple[str, ...], in_features: int, seed: int) -> Path:
@@ -57,7 +47,7 @@ def bundle_and_data(tmp_path_factory):
     from cloth_usd.runtime.io import COARSE_INPUTS, DETAIL_INPUTS
 
     tmp_path = tmp_path_factory.mktemp("bench_tiers")
-    train_data = _module("train_data", ROOT / "tests" / "nn" / "train_data.py")
+    train_data = load_script("train_data", ROOT / "tests" / "nn" / "train_data.py")
     with pytest.MonkeyPatch.context() as mp:
         mp.setattr(train_data, "TINY", SMALL)
         data = train_data.build_tiny_dataset(tmp_path / "data")
@@ -73,7 +63,7 @@ def bundle_and_data(tmp_path_factory):
 def test_bench_tiers_main_writes_table_plot_and_json(bundle_and_data, tmp_path, capsys, monkeypatch):
     from cloth_usd import evaluate
 
-    bench = _module("bench_tiers", ROOT / "bench" / "bench_tiers.py")
+    bench = load_script("bench_tiers", ROOT / "bench" / "bench_tiers.py")
     monkeypatch.setattr(evaluate, "_plot", lambda *args, **kwargs: None, raising=False)  # its histograms: 2 s
     bundle, data = bundle_and_data
     out = tmp_path / "out"
@@ -100,7 +90,7 @@ def test_failed_quantization_is_reported_not_raised(bundle_and_data, tmp_path, m
 
     from cloth_usd.runtime.bundle import load_bundle
 
-    bench = _module("bench_tiers", ROOT / "bench" / "bench_tiers.py")
+    bench = load_script("bench_tiers", ROOT / "bench" / "bench_tiers.py")
 
     def refuse(model_input, model_output, **kwargs):
         if "detail" in str(model_input):
@@ -118,7 +108,7 @@ def test_another_categorys_bundle_needs_a_garment_of_its_category(bundle_and_dat
     from cloth_usd.core.scene import Tier
     from cloth_usd.runtime.bundle import load_bundle, write_bundle
 
-    bench = _module("bench_tiers", ROOT / "bench" / "bench_tiers.py")
+    bench = load_script("bench_tiers", ROOT / "bench" / "bench_tiers.py")
     shirt, data = bundle_and_data
     made = load_bundle(shirt)
     dress = write_bundle(tmp_path / "dress", name="linear-dress", category="dress",
@@ -138,7 +128,7 @@ def test_bench_strain_limit_measures_each_setting_against_the_simulation(bundle_
     tighter limit moves the garment, and a malformed setting is one line naming it."""
     from cloth_usd.errors import ArgumentError
 
-    bench = _module("bench_strain_limit", ROOT / "bench" / "bench_strain_limit.py")
+    bench = load_script("bench_strain_limit", ROOT / "bench" / "bench_strain_limit.py")
     bundle, data = bundle_and_data
     assert bench.main(["--data", str(data), "--bundle", str(bundle), "--setting", "1.10/8", "--setting",
                        "1.01/16/1e-2", "--setting", "none", "--out", str(tmp_path / "out")]) == 0
@@ -157,7 +147,7 @@ def test_bench_newton_cloth_measures_newton_and_each_tier(bundle_and_data, tmp_p
     """bench/bench_newton_cloth.py: Newton's own frames (zero error to themselves), skinning and the
     bundle's tiers, with each frame's stretch (median and worst frame) and the share inside the body."""
     pytest.importorskip("torch", reason="the energies are the physics objective's (torch)")
-    bench = _module("bench_newton_cloth", ROOT / "bench" / "bench_newton_cloth.py")
+    bench = load_script("bench_newton_cloth", ROOT / "bench" / "bench_newton_cloth.py")
     bundle, data = bundle_and_data
     assert bench.main(["--data", str(data), "--bundle", str(bundle), "--out", str(tmp_path / "out")]) == 0
     assert "| Newton |" in capsys.readouterr().out
