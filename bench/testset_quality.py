@@ -24,25 +24,21 @@ from pathlib import Path
 import numpy as np
 
 from cloth_usd.core.mesh import vector_lengths
-from cloth_usd.core.shards import Manifest, read_shard
+from cloth_usd.core.shards import Manifest
 from cloth_usd.core.skinning import skin_garment
 from cloth_usd.datagen.floor import FLOOR_SPLIT, floor_report
 from cloth_usd.datagen.simulate import edge_ratios, unique_edges
 from cloth_usd.nn.data import load_dataset
 
 
-def furthest_from_skinning(root: Path) -> list[dict]:
-    """Every kept sequence's largest vertex distance from the skinned garment [mm] over its evaluated
-    frames, the frame (as ``cloth-usd evaluate`` counts them) and that frame's mean, furthest first."""
-    data = load_dataset(root)  # every split; the loader leaves the held poses of the floor out
-    rows = []
-    for clip in data.clips:
-        skinned = skin_garment(clip.pair.binding, clip.poses, clip.transl, data.body.parents)
-        err = 1000.0 * vector_lengths(skinned - clip.positions.astype(np.float64))
-        t = int(err.max(axis=1).argmax())
-        rows.append({"sequence": clip.name, "frame": t, "max_mm": float(err[t].max()),
-                     "frame_mean_mm": float(err[t].mean()), "sequence_mean_mm": float(err.mean())})
-    return sorted(rows, key=lambda r: -r["max_mm"])
+def furthest_from_skinning(clip, body) -> dict:
+    """A sequence's largest vertex distance from the skinned garment [mm] over its evaluated frames,
+    the frame (as ``cloth-usd evaluate`` counts them) and that frame's mean."""
+    skinned = skin_garment(clip.pair.binding, clip.poses, clip.transl, body.parents)
+    err = 1000.0 * vector_lengths(skinned - clip.positions.astype(np.float64))
+    t = int(err.max(axis=1).argmax())
+    return {"sequence": clip.name, "frame": t, "max_mm": float(err[t].max()), "frame_mean_mm": float(err[t].mean()),
+            "sequence_mean_mm": float(err.mean())}
 
 
 def main(argv=None) -> int:
@@ -57,27 +53,25 @@ def main(argv=None) -> int:
     manifest = Manifest.read(root)
     acc: dict[str, dict] = defaultdict(lambda: defaultdict(list))
     for name, entry in sorted(manifest.sequences.items()):
-        meta = entry.get("meta", {})
-        split = meta.get("split", "?")
-        if split == FLOOR_SPLIT:
-            continue
-        a = acc[split]
-        if entry.get("status") != "ok":
-            a["rejected"].append(name)
-            continue
-        shard = read_shard(root / entry["shard"])
-        warm = int(meta.get("warmup_frames", 0))
-        x = shard.positions[warm:].astype(np.float64)
-        rest = shard.garment_vertices.astype(np.float64)
-        edges = unique_edges(shard.garment_faces)
-        ratio = edge_ratios(x, rest, edges)
-        a["kept"].append(name)
+        split = entry.get("meta", {}).get("split", "?")
+        if split != FLOOR_SPLIT and entry.get("status") != "ok":
+            acc[split]["rejected"].append(name)
+    data = load_dataset(root)  # each kept sequence read once; the loader leaves the held poses of the floor out
+    furthest = []
+    for clip in data.clips:
+        a = acc[clip.split.value]
+        x = clip.positions.astype(np.float64)  # after the warm-up
+        ratio = edge_ratios(x, clip.rest_points, unique_edges(clip.pair.faces))
+        a["kept"].append(clip.name)
         a["frames"].append(x.shape[0])
-        a["vertices"].append(rest.shape[0])
-        a["penetration"].extend(shard.penetration[warm:].tolist())
+        a["vertices"].append(clip.rest_points.shape[0])
+        a["penetration"].extend(clip.penetration.tolist())
         a["stretch_p99"].extend(np.percentile(ratio, 99, axis=1).tolist())
         a["stretch_max"].append(float(ratio.max()))
-        a["s_per_frame"].append(float(entry.get("quality", {}).get("seconds_per_frame", np.nan)))
+        quality = manifest.sequences[clip.name].get("quality", {})
+        a["s_per_frame"].append(float(quality.get("seconds_per_frame", np.nan)))
+        furthest.append(furthest_from_skinning(clip, data.body))
+    furthest.sort(key=lambda r: -r["max_mm"])
     rows = []
     for split, a in sorted(acc.items()):
         pen = np.asarray(a["penetration"]) if a["penetration"] else np.zeros(1)
@@ -88,7 +82,6 @@ def main(argv=None) -> int:
                      "stretch_p99_median_frame": float(np.median(a["stretch_p99"])) if a["stretch_p99"] else 0.0,
                      "stretch_max": float(max(a["stretch_max"], default=0.0)),
                      "s_per_frame_median": float(np.nanmedian(a["s_per_frame"])) if a["s_per_frame"] else 0.0})
-    furthest = furthest_from_skinning(root) if any(r["kept"] for r in rows) else []
     floor = floor_report(root)
     lines = ["| split | kept | rejected | evaluated frames | vertices | inside body: mean / worst frame | "
              "stretch: median frame's p99 / max | s/frame |", "|---|---:|---:|---:|---:|---:|---:|---:|"]

@@ -65,7 +65,7 @@ def main(argv: list[str]) -> int:
             panels[label] = learned.evaluate(tier, clip.poses[:t + 1], clip.transl[:t + 1]).points[-1]
     panels["Newton"] = clip.positions[t].astype(np.float64)
     if args.repeat:
-        twin = [c for c in load_dataset(args.repeat, body=body).clips if c.name == clip.name]
+        twin = load_dataset(args.repeat, body=body, sequences=[clip.name]).clips  # that sequence alone
         if not twin or not np.allclose(twin[0].poses, clip.poses):
             raise SystemExit(f"--repeat {args.repeat}: no sequence {clip.name} of the same motion")
         panels["Newton, again"] = twin[0].positions[t].astype(np.float64)

@@ -107,6 +107,9 @@ class Clip:
     garment. What a bake of the authored garment reads (a garment's own bundle reads the one
     of the two it was trained on: :func:`cloth_usd.evaluate.garment_reads`). None when the
     folder keeps no drape of this pair."""
+    penetration: np.ndarray | None = None
+    """(T,) the fraction of the garment's vertices inside the body in each frame, as the
+    simulator measured it (the shard's); None when made elsewhere."""
 
     @property
     def num_frames(self) -> int:
@@ -142,7 +145,8 @@ def _pair_key(rest: np.ndarray, faces: np.ndarray, betas: np.ndarray) -> str:
 
 
 def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, *,
-                 body: BodyModel | None = None, max_frames: int | None = None) -> DataSet:
+                 body: BodyModel | None = None, max_frames: int | None = None,
+                 sequences: Iterable[str] | None = None) -> DataSet:
     """Load the accepted shards of some splits of a factory folder, each without its warm-up
     frames (:func:`warmup_frames`).
 
@@ -151,6 +155,8 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
         splits: the splits to load (all when None).
         body: the body model the data was simulated with (default: the embedded one).
         max_frames: keep only the first frames of every sequence after its warm-up (quick runs).
+        sequences: load only the sequences of these manifest names (all when None; a name the
+            folder does not hold, or not among its accepted sequences, loads nothing).
     Raises:
         ArgumentError: naming the folder, when it is not a data set or a shard is unreadable.
     """
@@ -165,11 +171,14 @@ def load_dataset(root: str | Path, splits: Iterable[Split | str] | None = None, 
     except DatasetError as exc:
         raise ArgumentError(str(exc)) from exc
     wanted = {Split(s) for s in splits} if splits is not None else set(Split)
+    named = set(sequences) if sequences is not None else None
     body = body if body is not None else load_body_model()
     fit = FitModel.load(root / FIT)
     pairs: dict[str, GarmentPair] = {}
     chosen = []
     for name in manifest.accepted:
+        if named is not None and name not in named:
+            continue
         entry = manifest.sequences[name]
         split_name = entry.get("split") or entry.get("meta", {}).get("split")
         if entry.get("meta", {}).get("floor_of"):
@@ -232,7 +241,7 @@ def _clip(body: BodyModel, fit: FitModel, pairs: dict, root: Path, name: str, en
         return None
     return Clip(name=name, split=split, meta=meta, pair=pairs[key],
                 rest_points=rest, positions=shard.positions[w:t], coarse=shard.coarse[w:t],
-                poses=shard.poses[w:t], transl=shard.transl[w:t],
+                poses=shard.poses[w:t], transl=shard.transl[w:t], penetration=shard.penetration[w:t],
                 authored_points=(authored or {}).get(_draped_key(shard.garment_vertices)))
 
 

@@ -50,6 +50,18 @@ def data(tmp_path_factory):
     return path, load_dataset(path, (Split.TRAIN, Split.VAL))
 
 
+def test_a_data_set_loads_only_the_named_sequences(data):
+    """load_dataset(sequences=...) reads the named sequences alone (a render of one frame, a repeat's
+    twin), each with the simulator's penetration per frame; a name the folder lacks loads nothing."""
+    path, ds = data
+    clip = ds.clips[0]
+    one = load_dataset(path, sequences=[clip.name])
+    assert [c.name for c in one.clips] == [clip.name]
+    np.testing.assert_array_equal(one.clips[0].positions, clip.positions)
+    assert one.clips[0].penetration.shape == (clip.num_frames,)
+    assert load_dataset(path, sequences=["no such sequence"]).clips == ()
+
+
 def test_training_inputs_are_the_runtime_inputs(data):
     """The features train.py builds are, bit for bit, those run_tiers feeds the models at inference."""
     _, ds = data
