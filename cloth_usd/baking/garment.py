@@ -13,7 +13,7 @@ from ..core.body import BodyModel
 from ..core.fit import FIT_LIMIT
 from ..core.frames import CanonicalMotion
 from ..core.graph import directed_edges
-from ..core.guard import GuardLimits, check_frames
+from ..core.guard import GuardLimits, check_frames, guard_limits
 from ..core.limits import BETA_LIMIT, BETA_MARGIN, betas_outside, betas_outside_range, pose_outliers
 from ..core.mesh import vector_lengths
 from ..core.plausibility import body_notes
@@ -101,7 +101,7 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
                  bundle: ModelBundle | None = None, batch_size: int | None = None,
                  cache: ModelCache | None = None, notes: Sequence[str] = (), source: str = "",
                  on_progress: Callable[[str, int, int], None] | None = None, strict: bool = False,
-                 guard: GuardLimits = GuardLimits()) -> GarmentReport:
+                 guard: GuardLimits | None = None) -> GarmentReport:
     """Evaluate one garment at every time code and add its points to ``writer``.
 
     Args:
@@ -111,10 +111,13 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
         chunk: frames per batch (skinning tier; a learned tier uses ``batch_size``).
         notes: what lies outside the trained range (:func:`range_notes`), warned about.
         strict: a learned frame the guard rejects is a GarmentError instead of a fallback.
+        guard: when a learned frame is not a garment (None: the garment's category's,
+            :func:`~cloth_usd.core.guard.guard_limits`).
     Raises:
         GarmentError: non-finite points, or a rejected frame with ``strict``.
     """
     cache = cache or ModelCache()
+    guard = guard if guard is not None else guard_limits(garment.category)
     where = f"{source} <{garment.prim_path}>"
     rest = motion.rest_points(garment.rest_points)
 

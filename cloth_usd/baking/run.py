@@ -95,7 +95,7 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
          progress: bool = False, models: str | Path | Sequence[str | Path] | None = None,
          batch_size: int | None = None, skip_current: bool = False, cache: ModelCache | None = None,
          on_progress: Callable[[str, int, int], None] | None = None, strict: bool = False,
-         guard: GuardLimits = GuardLimits(), joint_map: dict[str, str] | str | Path | None = None,
+         guard: GuardLimits | None = None, joint_map: dict[str, str] | str | Path | None = None,
          max_cache_bytes: int | None = None, allow_any_size: bool = False) -> BakeResult:
     """Bake every enabled garment (or the named ones) of a stage into a point-cache layer.
 
@@ -126,7 +126,8 @@ def bake(scene_path: str | Path, output: str | Path, *, shot: str | Path | None 
             each batch of frames is added to the (temporary) layer.
         strict: a learned frame the guard rejects is an error (nothing is written) instead
             of falling back to the next safer tier for that frame.
-        guard: when a learned frame is not a garment (:mod:`cloth_usd.core.guard`).
+        guard: when a learned frame is not a garment (:mod:`cloth_usd.core.guard`; None: each
+            garment's category's, :func:`~cloth_usd.core.guard.guard_limits`).
         joint_map: ``{their joint name: SMPL joint name}`` or a JSON / TOML file of it, for
             skeletons named in no known convention (:mod:`cloth_usd.core.joint_names`).
         max_cache_bytes: refuse a bake whose cache (:func:`~cloth_usd.baking.size.cache_bytes`)

@@ -78,3 +78,17 @@ def test_bad_limits_and_shapes_are_refused():
         GuardLimits(stretch=0.9)
     with pytest.raises(ArgumentError, match=r"must be \(T, N, 3\)"):
         check_frames(np.zeros((2, 4, 3)), np.zeros((2, 5, 3)), np.zeros((4, 3)), _EDGES)
+
+
+def test_a_dress_may_swing_further_from_skinning_than_a_shirt():
+    """guard_limits: a skirt swung 15 cm from the legs skinning binds it to, its median vertex
+    with it (as Newton's sample dress does in 3% of its frames), is a dress's frame, not a shirt's."""
+    from cloth_usd.core.guard import DRESS_LIMITS, guard_limits
+
+    assert guard_limits("dress") == DRESS_LIMITS and guard_limits("tshirt") == GuardLimits() == guard_limits("trousers")
+    swung = _GRID + [0.0, 0.0, 0.15]
+    assert check_frames(_frames(swung), _frames(_GRID), _GRID, _EDGES, guard_limits("dress")).ok.tolist() == [True]
+    shirt = check_frames(_frames(swung), _frames(_GRID), _GRID, _EDGES, guard_limits("tshirt"))
+    assert not shirt.ok[0] and shirt.reasons[0].startswith("half its vertices over 150.0 mm")
+    with pytest.raises(ValueError):
+        guard_limits("hat")

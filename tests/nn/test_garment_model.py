@@ -256,6 +256,70 @@ def test_export_writes_a_bundle_bound_to_the_garment_that_animates_it(own, tmp_p
     assert "\n" not in str(err.value) and "train-garment" in str(err.value)
 
 
+def test_a_garment_reads_the_joints_that_move_it_their_chain_their_children_and_mirrors():
+    """read_joints: a garment bound to the left thigh (and a trace of the left hand, under the
+    weight that counts) reads the pelvis above it and the right side, not the knees below it,
+    unless it lies on a body vertex the knee moves (a skirt on the shins)."""
+    from cloth_usd.core.garment_inputs import READ_WEIGHT, read_joints
+    from cloth_usd.core.smpl import JOINT_NAMES
+
+    w = np.zeros((3, 24))
+    w[:, JOINT_NAMES.index("left_hip")] = 1.0
+    w[0, JOINT_NAMES.index("left_hand")] = 0.5 * READ_WEIGHT
+    read = {JOINT_NAMES[j] for j in np.flatnonzero(read_joints(w))}
+    assert read == {"pelvis", "left_hip", "right_hip"}
+    shin = np.zeros((1, 24))
+    shin[0, JOINT_NAMES.index("right_knee")] = 1.0
+    read = {JOINT_NAMES[j] for j in np.flatnonzero(read_joints(w, shin))}
+    assert read == {"pelvis", "left_hip", "right_hip", "left_knee", "right_knee"}
+    with pytest.raises(ValueError, match=r"\(N, 24\)"):
+        read_joints(np.zeros((3, 23)))
+
+
+def test_the_model_reads_only_the_joints_that_move_its_garment(own, tmp_path):
+    """A T-shirt's model ignores its hands and feet: the exported files give the same garment
+    whatever they do, the manifest gives them the whole circle (a bake warns of no hand), and a
+    run made before the models read the joints (no ``pose_joints``) reads all 24, as it was trained."""
+    from cloth_usd.core.garment_inputs import garment_displacement_inputs
+    from cloth_usd.core.limits import pose_outliers
+    from cloth_usd.core.smpl import JOINT_NAMES
+    from cloth_usd.datagen import walk_cycle
+    from cloth_usd.nn.garment_model import export_garment_bundle, load_garment_run
+    from cloth_usd.runtime.bundle import load_bundle
+    from cloth_usd.runtime.session import ModelSession
+
+    root, body, data, *_ = own
+    run = json.loads((root / "coarse" / "run.json").read_text())
+    assert {"spine3", "left_shoulder", "left_hip"} <= set(run["pose_joints"])
+    unread = sorted(set(JOINT_NAMES) - set(run["pose_joints"]))
+    assert {"left_hand", "right_hand", "left_foot", "right_foot"} <= set(unread)
+    bundle = load_bundle(export_garment_bundle(root / "coarse", root / "detail", root / "data.json", tmp_path / "b",
+                                               name="mine", body=body, physics=data))
+    poses, _ = walk_cycle(3)
+    turned = poses.copy()
+    for name in unread:
+        turned[:, 3 * JOINT_NAMES.index(name):3 * JOINT_NAMES.index(name) + 3] = [2.9, 0.4, -0.3]
+    shoulder = poses.copy()
+    shoulder[:, 3 * JOINT_NAMES.index("left_shoulder") + 2] += 0.5
+    for tier in ("coarse", "detail"):
+        session = ModelSession(bundle.path / bundle.manifest["models"][tier]["file"], prefer_gpu=False)
+        out = [session.run(garment_displacement_inputs(p, np.zeros(10)))["delta"]
+               for p in (poses, turned, shoulder)]
+        np.testing.assert_array_equal(out[0], out[1])
+        assert np.abs(out[2] - out[0]).max() > 1e-6
+        assert bundle.manifest["models"][tier]["config"]["pose_joints"] == run["pose_joints"]
+    assert bundle.manifest["training_data"]["poses"]["euler_deg"]["left_hand"] == [[-180.0, 180.0]] * 3
+    assert pose_outliers(turned, limits=bundle.pose_limits) is None
+    # a run from before: every joint, the net as it was trained
+    (tmp_path / "old").mkdir()
+    for name in ("model.pt", "history.csv"):
+        (tmp_path / "old" / name).write_bytes((root / "coarse" / name).read_bytes())
+    old = {k: v for k, v in run.items() if k != "pose_joints"}
+    (tmp_path / "old" / "run.json").write_text(json.dumps(old))
+    assert load_garment_run(tmp_path / "old")[0].joints.all()
+    assert not load_garment_run(root / "coarse")[0].joints.all()
+
+
 def test_cloth_usd_export_re_exports_garment_runs_with_their_evaluation(own, tmp_path, capsys):
     """``cloth-usd export`` of a train-garment work folder's runs: byte-identical files, and
     evaluation metrics measured on them are recorded as the same models."""
