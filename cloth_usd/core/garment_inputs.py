@@ -21,7 +21,7 @@ import numpy as np
 from .body import blend_skin, joint_transforms, pose_feature
 from .rotations import axis_angle_to_matrix
 from .skinning import SkinBinding
-from .smpl import JOINT_NAMES, NUM_JOINTS, PARENTS
+from .smpl import MIRROR_JOINTS, NUM_JOINTS, PARENTS
 
 __all__ = ["POSE_FEATURES", "SHAPE_FEATURES", "READ_REACH", "READ_WEIGHT", "SkinParts", "faces_sha256",
            "garment_displacement_inputs", "pose_features", "read_joints", "shape_features", "skin_displaced",
@@ -78,9 +78,7 @@ def read_joints(weights, body_weights=None) -> np.ndarray:
         while p >= 0:
             read[p] = True
             p = PARENTS[p]
-    mirror = [JOINT_NAMES.index(n.replace("left_", "-").replace("right_", "left_").replace("-", "right_"))
-              for n in JOINT_NAMES]
-    return read | read[mirror]
+    return read | read[list(MIRROR_JOINTS)]
 
 
 def pose_features(poses: np.ndarray) -> np.ndarray:

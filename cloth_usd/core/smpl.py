@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["JOINT_NAMES", "PARENTS", "NUM_JOINTS", "NUM_BETAS", "POSE_DIM"]
+__all__ = ["JOINT_NAMES", "PARENTS", "MIRROR_JOINTS", "NUM_JOINTS", "NUM_BETAS", "POSE_DIM"]
 
 #: The 24 SMPL joints, in SMPL's order (index = SMPL joint index).
 JOINT_NAMES: tuple[str, ...] = (
@@ -21,6 +21,9 @@ PARENTS: np.ndarray = np.array(
     dtype=np.int64,
 )
 PARENTS.setflags(write=False)
+
+#: SMPL's 24 joints with left and right swapped.
+MIRROR_JOINTS = (0, 2, 1, 3, 5, 4, 6, 8, 7, 9, 11, 10, 12, 14, 13, 15, 17, 16, 19, 18, 21, 20, 23, 22)
 
 NUM_JOINTS = 24
 NUM_BETAS = 10

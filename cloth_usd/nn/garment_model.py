@@ -404,7 +404,8 @@ def train_garment_model(data_config: str | Path, run_dir: str | Path, config: Ga
                          "model_sha256": hashlib.sha256((Path(coarse_run) / MODEL).read_bytes()).hexdigest()}
     joints = None
     if config.joints == "garment":  # those that move the garment on any of the bodies it is trained on
-        joints = np.logical_or.reduce([_pair_joints(c.source.pair, body) for c in train + val])
+        pairs = {id(c.source.pair): c.source.pair for c in train + val}.values()  # each body's once
+        joints = np.logical_or.reduce([_pair_joints(pair, body) for pair in pairs])
     net = GarmentNet(num_vertices, config.hidden, config.layers, config.output_scale, joints=joints).double()
     opt = torch.optim.Adam(net.parameters(), lr=config.lr)
     decay = (config.lr_final / config.lr) ** (1.0 / max(config.steps, 1))

@@ -22,12 +22,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.association import associate
+from ..core.smpl import MIRROR_JOINTS
 from ..errors import ArgumentError
 
 __all__ = ["MIRROR_JOINTS", "SYMMETRY_TOLERANCE", "MirrorMap", "mirror_map", "mirror_poses", "mirrored_clip"]
-
-#: SMPL's 24 joints with left and right swapped.
-MIRROR_JOINTS = (0, 2, 1, 3, 5, 4, 6, 8, 7, 9, 11, 10, 12, 14, 13, 15, 17, 16, 19, 18, 21, 20, 23, 22)
 
 #: Largest distance [m] of a vertex's mirror image from the rest garment's surface for a garment
 #: to count as symmetric (the sample shirt: 0.002 mm at the median vertex, 1.8 mm at the 99th
