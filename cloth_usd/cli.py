@@ -586,9 +586,11 @@ def _train_garment(args: argparse.Namespace) -> int:
 
     from .core.body import load_body_model, shape_body
     from .core.frames import worn_rest_points
+    from .core.smpl import JOINT_NAMES
     from .datagen.factory import OwnGarment
     from .errors import ArgumentError
     from .nn.own_garment import HYBRID_CONFIG, TEST_SET_CONFIG, OwnGarmentPlan, train_own_garment
+    from .runtime.bundle import load_bundle
     from .usd.read import open_stage, read_scene
 
     plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches,
@@ -658,6 +660,11 @@ def _train_garment(args: argparse.Namespace) -> int:
                      f"a Newton test set for it: cloth-usd datagen {result.work_dir / TEST_SET_CONFIG} -o TESTSET"
                      f"{mocap}, then cloth-usd evaluate --data TESTSET "
                      f"--bundle {result.bundle}\n")
+    read = (load_bundle(result.bundle).manifest["models"]["coarse"].get("config") or {}).get("pose_joints")
+    if read is not None:  # the garment form: the joints its models read (cloth_usd.core.garment_inputs.read_joints)
+        unread = [n for n in JOINT_NAMES if n not in read]
+        sys.stdout.write(f"its models read {len(read)} of {len(JOINT_NAMES)} joints"
+                         + (f"; not {', '.join(unread)}, which cannot move it\n" if unread else "\n"))
     if not args.sim_data and (result.work_dir / HYBRID_CONFIG).exists():  # the garment form, trained on its energy
         mocap = f" --mocap {args.mocap}" if args.mocap else ""
         sys.stdout.write(f"Newton's frames to train on too (the hybrid objective): cloth-usd datagen "

@@ -150,6 +150,7 @@ def test_train_garment_of_the_garment_form_bakes_the_sample(tmp_path, capsys):
     # the work folder's hybrid config: the training sequences, --sim-sequences of them simulated
     # with the test set's solver settings; the closing lines say how to train on them
     assert "hybrid.json" in said and "--sim-data" in said
+    assert "its models read" in said and "left_hand, right_hand, which cannot move it" in said
     hybrid = load_config(tmp_path / "own.work" / "hybrid.json")
     training = load_config(tmp_path / "own.work" / "data.json")
     assert hybrid.simulate_splits == ("train",) and hybrid.simulate_sequences == {"train": 12}
