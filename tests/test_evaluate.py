@@ -2,26 +2,19 @@
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from script_module import ROOT, load_script
 
 from cloth_usd.evaluate import HIST_BIN_MM, ErrorStats, body_label, shirt_labels
 
 
 def _train_data():
     """tests/nn/train_data.py (shared with the training tests) as a module."""
-    path = Path(__file__).parent / "nn" / "train_data.py"
-    spec = importlib.util.spec_from_file_location("train_data", path)
-    module = sys.modules.get("train_data") or importlib.util.module_from_spec(spec)
-    if "train_data" not in sys.modules:
-        spec.loader.exec_module(module)
-        sys.modules["train_data"] = module
-    return module
+    return load_script("train_data", ROOT / "tests" / "nn" / "train_data.py")
 
 
 def test_error_stats_bins_and_quantiles():

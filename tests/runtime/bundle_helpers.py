@@ -2,20 +2,17 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[2]
+from script_module import ROOT, load_script
+
 WIDTH = 0.125
 OUTPUT_SCALE = 0.005  # [m]: random weights give displacements of a few mm
 
 
 def load_make_bundle():
     """``scripts/make_bundle.py`` as a module (scripts/ is not a package)."""
-    spec = importlib.util.spec_from_file_location("make_bundle", ROOT / "scripts" / "make_bundle.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("make_bundle", ROOT / "scripts" / "make_bundle.py")
 
 
 def prepare_model(model, in_features: int, torch) -> None:
