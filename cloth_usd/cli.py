@@ -590,7 +590,6 @@ def _train_garment(args: argparse.Namespace) -> int:
     from .datagen.factory import OwnGarment
     from .errors import ArgumentError
     from .nn.own_garment import HYBRID_CONFIG, TEST_SET_CONFIG, OwnGarmentPlan, train_own_garment
-    from .runtime.bundle import load_bundle
     from .usd.read import open_stage, read_scene
 
     plan = OwnGarmentPlan(coarse_epochs=args.coarse_epochs, detail_epochs=args.detail_epochs, batches=args.batches,
@@ -660,7 +659,7 @@ def _train_garment(args: argparse.Namespace) -> int:
                      f"a Newton test set for it: cloth-usd datagen {result.work_dir / TEST_SET_CONFIG} -o TESTSET"
                      f"{mocap}, then cloth-usd evaluate --data TESTSET "
                      f"--bundle {result.bundle}\n")
-    read = (load_bundle(result.bundle).manifest["models"]["coarse"].get("config") or {}).get("pose_joints")
+    read = result.pose_joints
     if read is not None:  # the garment form: the joints its models read (cloth_usd.core.garment_inputs.read_joints)
         unread = [n for n in JOINT_NAMES if n not in read]
         sys.stdout.write(f"its models read {len(read)} of {len(JOINT_NAMES)} joints"

@@ -176,6 +176,9 @@ class OwnGarmentResult:
     detail_val: tuple[float, float]
     """The detail run's best validation: energy [J] (the paper form: against the coarse garment's),
     distance from the coarse garment [mm]."""
+    pose_joints: tuple[str, ...] | None = None
+    """The garment form: the joints whose rotations its models read
+    (:func:`~cloth_usd.core.garment_inputs.read_joints`); None for the paper form."""
 
 
 def _write_json(path: Path, data: dict) -> None:
@@ -340,4 +343,5 @@ def _train_garment_form(garment: OwnGarment, work: Path, out_dir: Path, runs: di
     log.info("%s: bundle in %s after %.1f min", name, out_dir, seconds["total"] / 60)
     return OwnGarmentResult(bundle=out_dir, work_dir=work, seconds=seconds,
                             coarse_val=(infos["coarse"]["best_val_energy"], infos["coarse"]["best_val_mm"]),
-                            detail_val=(infos["detail"]["best_val_energy"], infos["detail"]["best_val_mm"]))
+                            detail_val=(infos["detail"]["best_val_energy"], infos["detail"]["best_val_mm"]),
+                            pose_joints=tuple(infos["coarse"]["pose_joints"]))
