@@ -33,10 +33,8 @@ import numpy as np
 from cloth_usd.core.mesh import vector_lengths
 from cloth_usd.core.skinning import skin_garment
 from cloth_usd.evaluate import garment_reads, learned_garment
-from cloth_usd.nn.data import load_dataset
+from cloth_usd.nn.data import TEST_SPLITS, load_dataset
 from cloth_usd.runtime.bundle import load_bundle
-
-SPLITS = ("test_body", "test_garment", "test_motion")
 
 
 def _mm(x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -51,7 +49,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--bundle", action="append", default=[], help="a model bundle (repeatable)")
     ap.add_argument("--out", default="out/newton_repeat")
     args = ap.parse_args(argv)
-    first, again = load_dataset(args.data, SPLITS), load_dataset(args.repeat, SPLITS)
+    first, again = load_dataset(args.data, TEST_SPLITS), load_dataset(args.repeat, TEST_SPLITS)
     body = first.body
     twins = {c.name: c for c in again.clips}
     pairs = [(c, twins[c.name]) for c in first.clips if c.name in twins]
