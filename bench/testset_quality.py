@@ -5,11 +5,13 @@ the fraction of garment vertices inside the body (mean over frames, and the wors
 edge stretch against the rest garment (the median frame's 99th percentile, and the
 largest edge of any frame), the simulation's seconds per frame; then the sequences whose
 cloth lies furthest from the skinned garment (the largest vertex distance of any evaluated frame,
-and that frame): those checks are of a simulation's numbers, and a trouser leg that slid off a
-thigh passes them, so these are the frames to look at first (``scripts/testset_frame.py DATA
-SEQUENCE FRAME`` and ``scripts/render_tiers.py --frame-file``); then the per-frame error floor of
-the held poses (:func:`cloth_usd.datagen.floor.floor_report`). Writes ``OUT/quality.md`` and
-``OUT/quality.json`` (also printed).
+and that frame), with the largest share of the body the garment covers at rest that lies bare
+(``SimConfig.max_bare``'s measure, which a data set made before the factory checked it was never
+held to; past 0.1, a trouser leg has come off its thigh): the checks before it are of a simulation's
+numbers, and a garment that left the body can pass them, so these are the frames to look at first
+(``scripts/testset_frame.py DATA SEQUENCE FRAME`` and ``scripts/render_tiers.py --frame-file``);
+then the per-frame error floor of the held poses (:func:`cloth_usd.datagen.floor.floor_report`).
+Writes ``OUT/quality.md`` and ``OUT/quality.json`` (also printed).
 
 Run: python bench/testset_quality.py DATA [--out DATA/report] [--furthest 8]
 """
@@ -23,11 +25,12 @@ from pathlib import Path
 
 import numpy as np
 
+from cloth_usd.core.body import posed_vertices
 from cloth_usd.core.mesh import vector_lengths
 from cloth_usd.core.shards import Manifest
 from cloth_usd.core.skinning import skin_garment
 from cloth_usd.datagen.floor import FLOOR_SPLIT, floor_report
-from cloth_usd.datagen.simulate import edge_ratios, unique_edges
+from cloth_usd.datagen.simulate import Cover, edge_ratios, unique_edges
 from cloth_usd.nn.data import load_dataset
 
 
@@ -39,6 +42,17 @@ def furthest_from_skinning(clip, body) -> dict:
     t = int(err.max(axis=1).argmax())
     return {"sequence": clip.name, "frame": t, "max_mm": float(err[t].max()), "frame_mean_mm": float(err[t].mean()),
             "sequence_mean_mm": float(err.mean())}
+
+
+def bare_share(clip, body) -> dict:
+    """A sequence's largest share of bare body (:class:`~cloth_usd.datagen.simulate.Cover`) over its
+    evaluated frames, and that frame."""
+    rest = posed_vertices(body, clip.pair.betas, np.zeros((1,) + clip.poses.shape[1:]), np.zeros((1, 3)))[0]
+    cover = Cover.at_rest(clip.rest_points, clip.pair.faces, rest)
+    bodies = posed_vertices(body, clip.pair.betas, clip.poses, clip.transl)
+    bare = np.array([cover.bare(clip.positions[t], bodies[t]) for t in range(bodies.shape[0])])
+    t = int(np.nanargmax(bare)) if np.isfinite(bare).any() else 0
+    return {"bare_max": float(bare[t]), "bare_frame": t}
 
 
 def main(argv=None) -> int:
@@ -70,7 +84,7 @@ def main(argv=None) -> int:
         a["stretch_max"].append(float(ratio.max()))
         quality = manifest.sequences[clip.name].get("quality", {})
         a["s_per_frame"].append(float(quality.get("seconds_per_frame", np.nan)))
-        furthest.append(furthest_from_skinning(clip, data.body))
+        furthest.append({**furthest_from_skinning(clip, data.body), **bare_share(clip, data.body)})
     furthest.sort(key=lambda r: -r["max_mm"])
     rows = []
     for split, a in sorted(acc.items()):
@@ -93,10 +107,11 @@ def main(argv=None) -> int:
     if furthest:
         lines += ["", f"Furthest from the skinned garment ({min(args.furthest, len(furthest))} of {len(furthest)} "
                   "sequences; look at these frames first):", "",
-                  "| sequence | frame | largest mm | that frame's mean mm | sequence mean mm |",
-                  "|---|---:|---:|---:|---:|"]
+                  "| sequence | frame | largest mm | that frame's mean mm | sequence mean mm | most bare (frame) |",
+                  "|---|---:|---:|---:|---:|---:|"]
         lines += [f"| {f['sequence']} | {f['frame']} | {f['max_mm']:.1f} | {f['frame_mean_mm']:.1f} | "
-                  f"{f['sequence_mean_mm']:.1f} |" for f in furthest[:args.furthest]]
+                  f"{f['sequence_mean_mm']:.1f} | {100 * f['bare_max']:.1f}% ({f['bare_frame']}) |"
+                  for f in furthest[:args.furthest]]
     if floor:
         lines += ["", "Per-frame error floor (moving garment against the same pose held until settled):", "",
                   "| sequence | frame | mean mm | p95 mm | max mm | last held step mm |", "|---|---:|---:|---:|---:|---:|"]

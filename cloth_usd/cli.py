@@ -335,11 +335,14 @@ def _datagen(args: argparse.Namespace) -> int:
 
         first = manifest.rejected[0]
         failure = (manifest.sequences[first].get("quality") or {}).get("failure") or "unstable"
-        raise SimulationError(f"{args.config}: every sequence was rejected as unstable ({first}: {failure}); where "
-                              "a hand, an elbow or a raised knee presses into the cloth Newton's own cloth can stretch "
-                              "past the config's sim.max_stretch (1.6 unless set): raise it there to keep them (then "
-                              "look at them: a garment can leave the body), or set sim.keep_partial to keep their "
-                              "frames before it")
+        advice = ("a garment that slid off the body is not cloth to learn from; set sim.keep_partial to keep "
+                  "the frames before it, or sim.max_bare (0.1 unless set) if that much bare body is how the "
+                  "garment is worn" if "left the body" in failure else
+                  "where a hand, an elbow or a raised knee presses into the cloth Newton's own cloth can stretch "
+                  "past the config's sim.max_stretch (1.6 unless set): raise it there to keep them, or set "
+                  "sim.keep_partial to keep their frames before it")
+        raise SimulationError(f"{args.config}: every sequence was rejected as unstable ({first}: {failure}); "
+                              f"{advice}")
     return 0
 
 

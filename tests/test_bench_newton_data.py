@@ -98,3 +98,5 @@ def test_quality_report_lists_the_sequence_whose_cloth_left_the_skinned_garment_
     assert furthest[0]["max_mm"] > 250 and furthest[1]["max_mm"] < 50  # the stand-in's ripples: a few mm
     assert [f["max_mm"] for f in furthest] == sorted((f["max_mm"] for f in furthest), reverse=True)
     assert "look at these frames first" in (tmp_path / "q" / "quality.md").read_text()
+    # one vertex 30 cm off bares no body; every stand-in garment stays on its body
+    assert all(0.0 <= f["bare_max"] < 0.05 for f in furthest), [f["bare_max"] for f in furthest]

@@ -77,7 +77,7 @@ class FakeSim:
         if bad:
             stable[-1] = False
         return SimResult(positions=pos[:done], nan=np.zeros(done, bool), penetration=np.zeros(done),
-                         max_stretch=np.ones(done), max_speed=np.zeros(done), stable=stable,
+                         max_stretch=np.ones(done), max_speed=np.zeros(done), bare=np.zeros(done), stable=stable,
                          frames_requested=t, failure="frame 1: NaN/Inf positions" if bad else "",
                          device="cpu", seconds_per_frame=0.0)
 
@@ -225,7 +225,8 @@ class LateFailSim:
         stable = np.arange(done) < self.fail_at
         stretch = np.where(stable, 1.2, 1.7)
         return SimResult(positions=pos, nan=np.zeros(done, bool), penetration=np.zeros(done),
-                         max_stretch=stretch, max_speed=np.zeros(done), stable=stable, frames_requested=poses.shape[0],
+                         max_stretch=stretch, max_speed=np.zeros(done), bare=np.zeros(done), stable=stable,
+                         frames_requested=poses.shape[0],
                          failure=f"frame {self.fail_at}: edge stretch 1.7 > 1.6", device="cpu", seconds_per_frame=0.0)
 
 

@@ -188,7 +188,11 @@ def test_simulate_sequences_draws_part_of_the_plan(tmp_path, monkeypatch):
             plan_jobs(FactoryConfig(**{**TINY, "simulate_sequences": bad}))
 
 
-def test_datagen_fails_when_every_sequence_is_rejected(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("failure, setting, other", [
+    ("edge stretch 2.26 > 1.6", "sim.max_stretch", "sim.max_bare"),
+    ("the garment left the body: 25.3% of the body it covers at rest is bare (more than 10%)", "sim.max_bare",
+     "sim.max_stretch")])
+def test_datagen_fails_when_every_sequence_is_rejected(tmp_path, monkeypatch, capsys, failure, setting, other):
     """A run whose every sequence went unstable made no data set: exit 2, one line naming the config,
     the first sequence's failure and the setting that decides it (the manifest stays, as the record)."""
     from cloth_usd.core.shards import Manifest
@@ -197,7 +201,7 @@ def test_datagen_fails_when_every_sequence_is_rejected(tmp_path, monkeypatch, ca
     config_path = tmp_path / "tiny.json"
     config_path.write_text(json.dumps(TINY))
     rejected = {f"job{k}": {"status": "rejected", "shard": None, "seed": k,
-                            "quality": {"stable": False, "failure": f"frame {59 + k}: edge stretch 2.26 > 1.6"}}
+                            "quality": {"stable": False, "failure": f"frame {59 + k}: {failure}"}}
                 for k in range(2)}
 
     def all_rejected(config, out_dir, **kwargs):
@@ -209,4 +213,4 @@ def test_datagen_fails_when_every_sequence_is_rejected(tmp_path, monkeypatch, ca
     assert "0 sequences simulated, 2 rejected" in captured.out
     line = captured.err.strip()
     assert "\n" not in line and "tiny.json: every sequence was rejected" in line
-    assert "job0: frame 59: edge stretch 2.26 > 1.6" in line and "sim.max_stretch" in line
+    assert f"job0: frame 59: {failure}" in line and setting in line and other not in line

@@ -42,7 +42,7 @@ def fake_simulate(body, betas, garment_verts, garment_faces, poses, transl=None,
     t = positions.shape[0]
     zeros = np.zeros(t)
     return SimResult(positions=positions, nan=np.zeros(t, bool), penetration=zeros, max_stretch=np.ones(t),
-                     max_speed=zeros, stable=np.ones(t, bool), frames_requested=t, failure="", device="cpu",
+                     max_speed=zeros, bare=zeros, stable=np.ones(t, bool), frames_requested=t, failure="", device="cpu",
                      seconds_per_frame=0.0)
 
 
