@@ -25,12 +25,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_usd.core.body import posed_vertices
 from cloth_usd.core.mesh import vector_lengths
 from cloth_usd.core.shards import Manifest
 from cloth_usd.core.skinning import skin_garment
 from cloth_usd.datagen.floor import FLOOR_SPLIT, floor_report
-from cloth_usd.datagen.simulate import Cover, edge_ratios, unique_edges
+from cloth_usd.datagen.simulate import bare_shares, edge_ratios, unique_edges
 from cloth_usd.nn.data import load_dataset
 
 
@@ -45,12 +44,10 @@ def furthest_from_skinning(clip, body) -> dict:
 
 
 def bare_share(clip, body) -> dict:
-    """A sequence's largest share of bare body (:class:`~cloth_usd.datagen.simulate.Cover`) over its
-    evaluated frames, and that frame."""
-    rest = posed_vertices(body, clip.pair.betas, np.zeros((1,) + clip.poses.shape[1:]), np.zeros((1, 3)))[0]
-    cover = Cover.at_rest(clip.rest_points, clip.pair.faces, rest)
-    bodies = posed_vertices(body, clip.pair.betas, clip.poses, clip.transl)
-    bare = np.array([cover.bare(clip.positions[t], bodies[t]) for t in range(bodies.shape[0])])
+    """A sequence's largest share of bare body (:func:`~cloth_usd.datagen.simulate.bare_shares`) over
+    its evaluated frames, and that frame."""
+    bare = bare_shares(body, clip.pair.betas, clip.rest_points, clip.pair.faces, clip.positions, clip.poses,
+                       clip.transl)
     t = int(np.nanargmax(bare)) if np.isfinite(bare).any() else 0
     return {"bare_max": float(bare[t]), "bare_frame": t}
 

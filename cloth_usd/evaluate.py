@@ -308,6 +308,14 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
               shirts.get(int(clip.meta.get("shirt", -1))) if clip.split.value == "test_garment" else None
               for clip in clips}
     variety = {s: {labels[c.name] for c in clips if c.split.value == s} for s in {c.split.value for c in clips}}
+    left = _left_the_body(body, clips)
+    if left:
+        first = left[0]
+        log.warning("%s: Newton's garment left the body in %d frames of %d sequences (%s: %.0f%% of the body it "
+                    "covers at rest bare at frame %d): the errors there measure that, not the models; look at "
+                    "them (scripts/testset_frame.py) or make the test set again (the factory now stops there)",
+                    data_dir, sum(r["frames"] for r in left), len(left), first["sequence"],
+                    100 * first["max_bare"], first["frame"])
     for clip in clips:
         split = clip.split.value
         keys = _row_keys(split, labels[clip.name] if len(variety[split]) > 1 else None)
@@ -358,6 +366,7 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
         "ablations": ablations,
         "rows": rows,
         "floor": floor_report(data_dir),
+        "left_the_body": left,
     }
     (out / "metrics.json").write_text(json.dumps(metrics, indent=2) + "\n")
     np.savez(out / "histograms.npz", bin_mm=HIST_BIN_MM, edges_mm=np.arange(len(ErrorStats().counts) + 1) * HIST_BIN_MM,
@@ -365,6 +374,25 @@ def evaluate_bundle(data_dir: str | Path, bundle: str | Path, out_dir: str | Pat
     (out / "report.md").write_text(_markdown(metrics))
     _plot(stats, order, titles, tiers, out)
     return EvaluationReport(out_dir=out, tiers=tuple(tiers), rows=tuple(rows), metrics=metrics)
+
+
+def _left_the_body(body: BodyModel, clips) -> list[dict]:
+    """The test sequences whose simulated garment left the body in some evaluated frame (more of the
+    body it covers at rest bare than :data:`~cloth_usd.datagen.simulate.MAX_BARE`, the share past which
+    the data factory stops a sequence; a data set made before that check can hold such frames), most
+    bare first: sequence, frames past the share, evaluated frames, the largest share and its frame."""
+    from .datagen.simulate import MAX_BARE, bare_shares
+
+    out = []
+    for clip in clips:
+        bare = bare_shares(body, clip.pair.betas, clip.rest_points, clip.pair.faces, clip.positions, clip.poses,
+                           clip.transl)
+        past = np.nan_to_num(bare) > MAX_BARE
+        if past.any():
+            t = int(np.nanargmax(bare))
+            out.append({"sequence": clip.name, "frames": int(past.sum()), "of": int(bare.size),
+                        "max_bare": float(bare[t]), "frame": t})
+    return sorted(out, key=lambda r: -r["max_bare"])
 
 
 def _fmt(x: float) -> str:
@@ -397,6 +425,16 @@ def _markdown(metrics: dict) -> str:
         lines.append(f"- {label}: torch run `{a['run']}`, epoch {a['best_epoch']}{note}")
     has_ratio = "detail" in tiers
     head = ["test set", "sequences", "frames", *tiers] + (["detail / coarse"] if has_ratio else [])
+    left = metrics.get("left_the_body") or []
+    if left:
+        lines += ["", "## Test sequences whose simulated garment left the body", "",
+                  "In these frames more than a tenth of the body the garment covers at rest lies bare in Newton's "
+                  "frame (the share past which the data factory now stops a sequence): the errors there measure a "
+                  "garment that came off, not the models. Look at them (`scripts/testset_frame.py DATA SEQUENCE "
+                  "FRAME`), or make the test set again.", "",
+                  "| sequence | frames past it | most bare (frame) |", "|---|---:|---:|"]
+        lines += [f"| {r['sequence']} | {r['frames']} of {r['of']} | {100 * r['max_bare']:.1f}% ({r['frame']}) |"
+                  for r in left]
     lines += ["", "## Mean per-vertex error [mm]", "", "| " + " | ".join(head) + " |",
               "|" + "|".join(["---"] + ["---:"] * (len(head) - 1)) + "|"]
     for r in metrics["rows"]:

@@ -87,6 +87,7 @@ def test_evaluate_writes_report_with_every_tier(tmp_path_factory, tmp_path):
     assert all(a["coarse_matches_bundle"] for a in metrics["ablations"].values())
     keys = [r["key"] for r in metrics["rows"]]
     assert keys == ["test_body", "test_garment", "test_motion", "all"]
+    assert metrics["left_the_body"] == []  # the stand-in's garment stays on the body
     for row in metrics["rows"]:
         assert all(0 < row["mean_mm"][t] < 100 for t in tiers), row
     hist = np.load(out / "histograms.npz")
@@ -95,6 +96,27 @@ def test_evaluate_writes_report_with_every_tier(tmp_path_factory, tmp_path):
     for text in ["unseen bodies (all)", "unseen shirts (all)", "unseen motions (all)", "(I M_b)", *tiers]:
         assert text in report
     assert (out / "histograms.png").stat().st_size > 0 and (out / "means.png").stat().st_size > 0
+
+
+def test_test_sequences_whose_garment_left_the_body_are_named(tmp_path_factory):
+    """A test set made before the factory's bare-body check can hold frames where Newton's garment came off
+    the body; evaluate names those sequences (most bare first), and none where the garment stays on."""
+    import dataclasses
+
+    from cloth_usd.evaluate import _left_the_body
+    from cloth_usd.nn.data import Split, load_dataset
+
+    data = load_dataset(_train_data().tiny_dataset(tmp_path_factory), (Split.TEST_MOTION, Split.TEST_BODY))
+    clips = data.clips
+    assert len(clips) >= 2 and _left_the_body(data.body, clips) == []  # the stand-in is skinning plus ripples
+    off = clips[0].positions.copy()
+    off[2:] += np.float32([0.0, 0.0, 0.15])  # slid 15 cm forward off the body from frame 2
+    worse = clips[1].positions + np.float32([0.0, 0.0, 0.3])  # every frame, further
+    moved = [dataclasses.replace(clips[0], positions=off), dataclasses.replace(clips[1], positions=worse)]
+    left = _left_the_body(data.body, [*moved, *clips[2:]])
+    assert [r["sequence"] for r in left] == [clips[1].name, clips[0].name]
+    assert left[1]["frames"] == off.shape[0] - 2 and left[1]["of"] == off.shape[0] and left[1]["frame"] >= 2
+    assert left[0]["frames"] == left[0]["of"] and left[0]["max_bare"] > left[1]["max_bare"] > 0.1
 
 
 def test_ablation_labels_say_what_differs():

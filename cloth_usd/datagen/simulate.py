@@ -56,8 +56,10 @@ __all__ = [
     "penetration_fraction",
     "body_side",
     "Cover",
+    "bare_shares",
     "COVER_REACH",
     "BARE_DEPTH",
+    "MAX_BARE",
     "edge_stretch",
     "edge_ratios",
     "engine_versions",
@@ -104,6 +106,11 @@ class SolverKind(str, Enum):
     cotangent form against a flat rest, so the same numbers are a near, not an equal,
     material. It needs the mesh-shape collider; ``iterations`` are its non-linear
     iterations (10 PCG iterations each)."""
+
+
+#: The share of bare body past which a frame's garment has left the body (:attr:`SimConfig.max_bare`'s
+#: default, and what ``cloth-usd evaluate`` warns of in a test set made before the check).
+MAX_BARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -172,7 +179,7 @@ class SimConfig:
     """A garment vertex moving faster than this [m/s] between frames marks the frame unstable."""
     max_stretch: float = 1.6
     """An edge longer than this many times its rest length marks the frame unstable."""
-    max_bare: float = 0.1
+    max_bare: float = MAX_BARE
     """A frame where more than this share of the body the garment covers at rest lies bare
     (:class:`Cover`) is unstable: the garment has left the body, a trouser leg slid off its
     thigh. An edge limit does not see that (the leg's edges stay under 1.6 x rest). On the sample
@@ -484,6 +491,25 @@ class Cover:
             return 0.0
         side = _garment_side(points, self.faces, np.asarray(body_vertices, dtype=np.float64)[self.vertices])[1]
         return float(np.mean(self.outward * side > depth))
+
+
+def bare_shares(body: BodyModel, betas: np.ndarray, rest: np.ndarray, faces: np.ndarray, positions: np.ndarray,
+                poses: np.ndarray, transl: np.ndarray) -> np.ndarray:
+    """(T,) float64 the share of the body a garment covers at rest that lies bare in each frame of a
+    simulated sequence (:meth:`Cover.bare`; NaN where a point is not finite): what
+    :attr:`SimConfig.max_bare` holds a new sequence to, measured on any data set's frames.
+
+    Args:
+        body: the body model; betas: (B',) its shape.
+        rest: (N, 3) the rest garment [m], worn by the body in the rest pose at the origin.
+        faces: (M, 3) int its triangles.
+        positions: (T, N, 3) the simulated garment [m]; poses: (T, 72) axis-angle [rad];
+            transl: (T, 3) root translation [m].
+    """
+    zero = np.zeros((1,) + np.shape(poses)[1:])
+    cover = Cover.at_rest(rest, faces, posed_vertices(body, betas, zero, np.zeros((1, 3)))[0])
+    bodies = posed_vertices(body, betas, poses, transl)
+    return np.array([cover.bare(positions[t], bodies[t]) for t in range(bodies.shape[0])], dtype=np.float64)
 
 
 def _garment_side(points: np.ndarray, faces: np.ndarray, body: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
