@@ -182,10 +182,12 @@ class SimConfig:
     max_bare: float = MAX_BARE
     """A frame where more than this share of the body the garment covers at rest lies bare
     (:class:`Cover`) is unstable: the garment has left the body, a trouser leg slid off its
-    thigh. An edge limit does not see that (the leg's edges stay under 1.6 x rest). On the sample
+    thigh, or the body came through it (a dress's front pressed into the chest by crossed arms).
+    An edge limit does not see that (the leg's edges stay under 1.6 x rest). On the sample
     trousers' 42 kept sequences (34 at ``max_stretch`` 1.6 and 8 more at 2.0) the five whose
     leg came off bared 20-46% of it at their worst frame, the other 37 at most 4.9%; the dress's
-    10 training sequences at most 6.7%, the shirt's test set 3.2%. 1 turns the check off. Like
+    30 simulated training sequences at most 8.7% but for the one the check stopped (10.1%, the crossed
+    arms), the shirt's test set 3.2%. 1 turns the check off. Like
     :attr:`keep_partial` it decides what is kept, not how Newton simulates, so :meth:`to_json` leaves
     it out: a folder simulated before the check existed keeps its sequences (each sequence's quality
     record says whether it was checked: ``max_bare`` null or missing where not), and
