@@ -327,17 +327,20 @@ def _datagen(args: argparse.Namespace) -> int:
     deadline = time.time() + 60.0 * args.max_minutes if args.max_minutes is not None else None
     manifest = run_factory(load_config(args.config, mocap_dir=args.mocap), args.output, workers=args.workers,
                            batch=args.batch, penetration_frames=args.penetration_frames, deadline=deadline)
-    partial = f" ({len(manifest.partial)} of them unstable, their first frames kept)" if manifest.partial else ""
-    sys.stdout.write(f"{len(manifest.accepted)} sequences simulated{partial}, {len(manifest.rejected)} rejected "
-                     f"as unstable; manifest in {args.output}/manifest.json\n")
-    if manifest.rejected and not manifest.accepted:  # not a data set: nothing to train on or measure against
-        from .datagen.simulate import SimulationError
+    from .datagen.simulate import LEFT_THE_BODY, SimulationError
 
+    partial = f" ({len(manifest.partial)} of them unstable, their first frames kept)" if manifest.partial else ""
+    left = sum(LEFT_THE_BODY in ((manifest.sequences[name].get("quality") or {}).get("failure") or "")
+               for name in manifest.partial + manifest.rejected)
+    off = f"; {left} of the unstable ones stopped where {LEFT_THE_BODY}" if left else ""
+    sys.stdout.write(f"{len(manifest.accepted)} sequences simulated{partial}, {len(manifest.rejected)} rejected "
+                     f"as unstable{off}; manifest in {args.output}/manifest.json\n")
+    if manifest.rejected and not manifest.accepted:  # not a data set: nothing to train on or measure against
         first = manifest.rejected[0]
         failure = (manifest.sequences[first].get("quality") or {}).get("failure") or "unstable"
         advice = ("a garment that slid off the body is not cloth to learn from; set sim.keep_partial to keep "
                   "the frames before it, or sim.max_bare (0.1 unless set) if that much bare body is how the "
-                  "garment is worn" if "left the body" in failure else
+                  "garment is worn" if LEFT_THE_BODY in failure else
                   "where a hand, an elbow or a raised knee presses into the cloth Newton's own cloth can stretch "
                   "past the config's sim.max_stretch (1.6 unless set): raise it there to keep them, or set "
                   "sim.keep_partial to keep their frames before it")

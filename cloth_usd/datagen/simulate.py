@@ -60,6 +60,7 @@ __all__ = [
     "COVER_REACH",
     "BARE_DEPTH",
     "MAX_BARE",
+    "LEFT_THE_BODY",
     "edge_stretch",
     "edge_ratios",
     "engine_versions",
@@ -108,6 +109,8 @@ class SolverKind(str, Enum):
     iterations (10 PCG iterations each)."""
 
 
+#: How a sequence's failure begins where the bare-body check stopped it (:attr:`SimConfig.max_bare`).
+LEFT_THE_BODY = "the garment left the body"
 #: The share of bare body past which a frame's garment has left the body (:attr:`SimConfig.max_bare`'s
 #: default, and what ``cloth-usd evaluate`` warns of in a test set made before the check).
 MAX_BARE = 0.1
@@ -993,7 +996,7 @@ def simulate_batch(body: BodyModel, items: list[SimItem], config: SimConfig = Si
                               f"vertex speed {move * config.fps:.3g} m/s > {config.max_speed}" if move > max_move
                               else f"edge stretch {stretch[k]:.3g} > {config.max_stretch}"
                               if stretch[k] > config.max_stretch else
-                              f"the garment left the body: {bared:.1%} of the body it covers at rest is bare "
+                              f"{LEFT_THE_BODY}: {bared:.1%} of the body it covers at rest is bare "
                               f"(more than {config.max_bare:.0%})"))
                 log.warning("simulation unstable, stopping%s: %s", f" member {k}" if batched else "", failure[k])
                 running[k] = False

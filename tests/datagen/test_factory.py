@@ -188,6 +188,26 @@ def test_simulate_sequences_draws_part_of_the_plan(tmp_path, monkeypatch):
             plan_jobs(FactoryConfig(**{**TINY, "simulate_sequences": bad}))
 
 
+def test_datagen_says_how_many_sequences_stopped_where_the_garment_left_the_body(tmp_path, monkeypatch, capsys):
+    from cloth_usd.core.shards import Manifest
+    from cloth_usd.datagen import factory
+
+    config_path = tmp_path / "tiny.json"
+    config_path.write_text(json.dumps(TINY))
+    left = "frame 69: the garment left the body: 18.9% of the body it covers at rest is bare (more than 10%)"
+    sequences = {"whole": {"status": "ok", "shard": "whole.npz", "quality": {"stable": True, "failure": ""}},
+                 "part": {"status": "ok", "shard": "part.npz", "partial": {"frames": 63, "failure": left},
+                          "quality": {"stable": False, "failure": left}},
+                 "off": {"status": "rejected", "shard": None, "quality": {"stable": False, "failure": left}},
+                 "torn": {"status": "rejected", "shard": None,
+                          "quality": {"stable": False, "failure": "frame 82: edge stretch 2.03 > 2.0"}}}
+    monkeypatch.setattr(factory, "run_factory", lambda config, out_dir, **kwargs: Manifest(
+        config={}, dataset={}, engine={}, sequences=sequences))
+    assert main(["datagen", str(config_path), "-o", str(tmp_path / "d")]) == 0
+    assert ("2 sequences simulated (1 of them unstable, their first frames kept), 2 rejected as unstable; 2 of the "
+            "unstable ones stopped where the garment left the body" in capsys.readouterr().out)
+
+
 @pytest.mark.parametrize("failure, setting, other", [
     ("edge stretch 2.26 > 1.6", "sim.max_stretch", "sim.max_bare"),
     ("the garment left the body: 25.3% of the body it covers at rest is bare (more than 10%)", "sim.max_bare",
