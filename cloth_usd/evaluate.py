@@ -431,8 +431,8 @@ def _markdown(metrics: dict) -> str:
         lines += ["", "## Test sequences whose simulated garment left the body", "",
                   "In these frames more than a tenth of the body the garment covers at rest lies bare in Newton's "
                   "frame (the share past which the data factory now stops a sequence): the errors there measure a "
-                  "garment that came off, or that the body came through, not the models. Look at them (`scripts/testset_frame.py DATA SEQUENCE "
-                  "FRAME`), or make the test set again.", "",
+                  "garment that came off, or that the body came through, not the models. Look at them "
+                  "(`scripts/testset_frame.py DATA SEQUENCE FRAME`), or make the test set again.", "",
                   "| sequence | frames past it | most bare (frame) |", "|---|---:|---:|"]
         lines += [f"| {r['sequence']} | {r['frames']} of {r['of']} | {100 * r['max_bare']:.1f}% ({r['frame']}) |"
                   for r in left]
