@@ -511,8 +511,7 @@ def bare_shares(body: BodyModel, betas: np.ndarray, rest: np.ndarray, faces: np.
         positions: (T, N, 3) the simulated garment [m]; poses: (T, 72) axis-angle [rad];
             transl: (T, 3) root translation [m].
     """
-    zero = np.zeros((1,) + np.shape(poses)[1:])
-    cover = Cover.at_rest(rest, faces, posed_vertices(body, betas, zero, np.zeros((1, 3)))[0])
+    cover = Cover.at_rest(rest, faces, shape_body(body, betas)[0])
     bodies = posed_vertices(body, betas, poses, transl)
     return np.array([cover.bare(positions[t], bodies[t]) for t in range(bodies.shape[0])], dtype=np.float64)
 
