@@ -13,6 +13,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import cKDTree
 
+from .mesh import cross
+
 __all__ = ["Association", "associate", "closest_point_on_triangles", "incident_faces", "on_triangles", "surface_at"]
 
 
@@ -75,7 +77,7 @@ def closest_point_on_triangles(tri: np.ndarray, p: np.ndarray) -> tuple[np.ndarr
     bary[at_c] = (0.0, 0.0, 1.0)
     # Degenerate (zero-area or collinear) triangles: the region tests above run on
     # round-off, so take the nearest of the three edges as segments instead.
-    normal = np.cross(ab, ac)
+    normal = cross(ab, ac)
     flat = np.einsum("ij,ij->i", normal, normal) <= 1e-14 * (
         np.einsum("ij,ij->i", ab, ab) * np.einsum("ij,ij->i", ac, ac))
     flat |= ~np.isfinite(bary).all(axis=1)

@@ -18,7 +18,7 @@ import numpy as np
 from scipy import sparse
 
 from ..errors import ArgumentError
-from .mesh import vector_lengths
+from .mesh import cross, vector_lengths
 from .postprocess import nearest_vertex
 from .smpl import NUM_JOINTS
 
@@ -72,7 +72,7 @@ def vertex_normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
     p = pts[None] if single else pts
     num_t, num_v = p.shape[:2]
     a, b, c = p[:, faces[:, 0]], p[:, faces[:, 1]], p[:, faces[:, 2]]
-    face_n = np.cross(b - a, c - a)  # (T, M, 3), |.| = 2 area
+    face_n = cross(b - a, c - a)  # (T, M, 3), |.| = 2 area
     summed = _incidence(faces, num_v) @ face_n.transpose(1, 0, 2).reshape(faces.shape[0], -1)
     summed = np.asarray(summed).reshape(num_v, num_t, 3).transpose(1, 0, 2)
     length = vector_lengths(summed)[..., None]

