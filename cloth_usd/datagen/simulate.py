@@ -735,7 +735,7 @@ class _Member:
     first: int = 0  # first particle of the member in the model
     shape: int = -1  # its body mesh shape (mesh-shape collider)
     mesh: object = None  # its newton.Mesh (mesh-shape collider)
-    cover: Cover | None = None  # the body its garment covers at rest (SimConfig.max_bare)
+    cover: Cover | None = None  # the body its garment covers at rest (None: SimConfig.max_bare 1, no check)
 
 
 def _members(body: BodyModel, items: list[SimItem], config: SimConfig) -> list[_Member]:
@@ -752,7 +752,7 @@ def _members(body: BodyModel, items: list[SimItem], config: SimConfig) -> list[_
         rest = verts + transl[0]
         out.append(_Member(rest=rest, faces=faces, edges=unique_edges(faces), body_full=body_full,
                            body_col=collider.pose(body_full, body.faces).astype(np.float32), collider=collider,
-                           cover=Cover.at_rest(rest, faces, body_full[0])))
+                           cover=Cover.at_rest(rest, faces, body_full[0]) if config.max_bare < 1.0 else None))
     frames = {m.body_full.shape[0] for m in out}
     if len(frames) > 1:
         raise SimulationError(f"the members of a batch must have the same number of frames, got {sorted(frames)}")
@@ -946,8 +946,7 @@ def simulate_batch(body: BodyModel, items: list[SimItem], config: SimConfig = Si
     nan = [[False] for _ in members]
     stable = [[True] for _ in members]
     speed = [[0.0] for _ in members]
-    checked = config.max_bare < 1.0  # the bare check is on (frame 0 is the rest garment: none bare)
-    bare = [[0.0 if checked else float("nan")] for _ in members]
+    bare = [[float("nan") if m.cover is None else 0.0] for m in members]  # frame 0 is the rest garment: none bare
     failure = [""] * count
     running = np.ones(count, dtype=bool)
     max_move = config.max_speed / config.fps
@@ -981,7 +980,7 @@ def simulate_batch(body: BodyModel, items: list[SimItem], config: SimConfig = Si
             finite = bool(np.all(np.isfinite(qk)))
             move = (float(np.max(np.linalg.norm(qk.astype(np.float64) - positions[k][-1], axis=1)))
                     if finite else np.inf)
-            bared = m.cover.bare(qk, m.body_full[t]) if finite and checked else float("nan")
+            bared = m.cover.bare(qk, m.body_full[t]) if finite and m.cover is not None else float("nan")
             positions[k].append(qk)
             stretches[k].append(float(stretch[k]))
             nan[k].append(not finite)
