@@ -64,7 +64,6 @@ def test_the_canonical_body_is_the_world_body_turned_about_the_pelvis(shirt):
     np.testing.assert_allclose(frame.to_canonical(world), turned, atol=1e-9)
 
 
-
 def test_the_turn_is_the_yaw_matrices_about_the_pelvis():
     """HeadingFrame turns points component by component: the same values as ``yaw_matrices`` applied
     about each frame's pivot."""
