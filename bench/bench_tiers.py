@@ -106,11 +106,13 @@ def _cpu_sessions(bundle, threads: int) -> float:
     ``ModelBundle.session`` takes no thread count, so the sessions are made here with
     :class:`ModelSession`'s own ``intra_op_threads`` and put where ``session`` finds them.
     """
+    from cloth_usd.runtime.bundle import SPINNING_TIERS
     from cloth_usd.runtime.session import ModelSession
 
     t = time.perf_counter()
-    for tier in bundle.tiers:
-        bundle._sessions[tier] = ModelSession(bundle.model_path(tier), intra_op_threads=threads, prefer_gpu=False)
+    for tier in bundle.tiers:  # spinning as a bake's sessions spin
+        bundle._sessions[tier] = ModelSession(bundle.model_path(tier), intra_op_threads=threads, prefer_gpu=False,
+                                              spin=tier in SPINNING_TIERS)
     return (time.perf_counter() - t) * 1e3
 
 

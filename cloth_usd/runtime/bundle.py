@@ -45,8 +45,8 @@ from ..errors import ArgumentError, BundleError, ClothUsdError
 from .io import COARSE_INPUTS, DETAIL_INPUTS, GARMENT_INPUTS, OUTPUT
 from .session import ModelSession
 
-__all__ = ["FORMAT_VERSION", "MANIFEST", "DEFAULTS", "GarmentIdentity", "ModelBundle", "load_bundle", "find_bundle",
-           "write_bundle", "default_bundle_dir"]
+__all__ = ["FORMAT_VERSION", "MANIFEST", "DEFAULTS", "SPINNING_TIERS", "GarmentIdentity", "ModelBundle", "load_bundle",
+           "find_bundle", "write_bundle", "default_bundle_dir"]
 
 log = logging.getLogger(__name__)
 
@@ -55,6 +55,14 @@ FORMAT_VERSION = 1
 #: The manifest's file name inside a bundle folder.
 MANIFEST = "manifest.json"
 _INPUTS = {Tier.COARSE: COARSE_INPUTS, Tier.DETAIL: DETAIL_INPUTS}
+#: The tiers whose onnxruntime threads spin for more work after a run (:class:`ModelSession`'s
+#: ``spin``). The detail tier's run is followed by the post-process's strain limit and push on the
+#: CPU, and its threads spinning beside them slowed the tier: on two cores with two threads (the
+#: detail session spinning and not, alternated eight times in one process, the coarse one spinning)
+#: `tshirt-v6` on a 4041-vertex shirt took a median 44.1 ms a frame spinning and 42.0 not,
+#: `sample-tshirt-own` on its shirt 15.5 and 14.2. The coarse tier lost by not spinning (15.5 against
+#: 16.1 ms, alternated three times), its model's many small steps waiting for the threads to wake.
+SPINNING_TIERS = (Tier.COARSE,)
 
 
 @dataclass(frozen=True)
@@ -150,7 +158,7 @@ class ModelBundle:
         if tier not in self._sessions:
             path = self.model_path(tier)
             try:
-                session = ModelSession(path, prefer_gpu=prefer_gpu)
+                session = ModelSession(path, prefer_gpu=prefer_gpu, spin=tier in SPINNING_TIERS)
             except ClothUsdError:
                 raise
             except Exception as exc:  # onnxruntime's errors (InvalidProtobuf, Fail, ...) derive from Exception only

@@ -42,15 +42,20 @@ class ModelSession:
         path: the ``.onnx`` file.
         intra_op_threads: onnxruntime's intra-op thread count (0: its default).
         prefer_gpu: use CUDA when onnxruntime offers it.
+        spin: onnxruntime's threads spin, waiting for more work, after a run (its default);
+            False: they sleep at once and leave the CPU to what follows the run
+            (:data:`~cloth_usd.runtime.bundle.SPINNING_TIERS`).
     """
 
-    def __init__(self, path: str | Path, *, intra_op_threads: int = 0, prefer_gpu: bool = True) -> None:
+    def __init__(self, path: str | Path, *, intra_op_threads: int = 0, prefer_gpu: bool = True,
+                 spin: bool = True) -> None:
         ort = _ort()
         path = Path(path)
         if not path.is_file():
             raise ClothUsdError(f"model file not found: {path}")
         options = ort.SessionOptions()
         options.intra_op_num_threads = int(intra_op_threads)
+        options.add_session_config_entry("session.intra_op.allow_spinning", "1" if spin else "0")
         self.path = path
         self.providers = pick_providers(prefer_gpu=prefer_gpu)
         self._session = ort.InferenceSession(str(path), sess_options=options, providers=self.providers)

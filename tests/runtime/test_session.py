@@ -54,6 +54,28 @@ def test_runs_a_batch(tiny_model):
     np.testing.assert_array_equal(out, feats[:, [1, 0, 1], :3])
 
 
+def test_sessions_spin_after_a_run_unless_told_not_to_and_the_same_either_way(tiny_model):
+    """``spin`` reaches onnxruntime's session options; a bundle's coarse session spins, its detail session
+    does not (SPINNING_TIERS: the detail tier's post-process follows its run on the CPU)."""
+    from cloth_usd.runtime.bundle import SPINNING_TIERS, find_bundle
+    from cloth_usd.core.scene import Tier
+
+    table = NeighbourTable(nbr=np.array([[1, 2], [0, 1], [1, 2]]), mask=np.ones((3, 2), bool), truncated=0)
+    feats = np.arange(2 * 3 * 7, dtype=np.float32).reshape(2, 3, 7)
+    key = "session.intra_op.allow_spinning"
+    runs = []
+    for spin, want in ((True, "1"), (False, "0")):
+        session = ModelSession(tiny_model, intra_op_threads=2, spin=spin)
+        assert session._session.get_session_options().get_session_config_entry(key) == want
+        runs.append(session.run(coarse_inputs(feats, table))["delta"])
+    np.testing.assert_array_equal(runs[0], runs[1])
+    assert SPINNING_TIERS == (Tier.COARSE,)
+    bundle = find_bundle("tshirt")
+    for tier in bundle.tiers:
+        entry = bundle.session(tier, prefer_gpu=False)._session.get_session_options().get_session_config_entry(key)
+        assert entry == ("1" if tier is Tier.COARSE else "0")
+
+
 def test_missing_input_names_the_options(tiny_model):
     with pytest.raises(ClothUsdError, match="nbr_mask"):
         ModelSession(tiny_model).run({"features": np.zeros((1, 1, 7), np.float32)})
