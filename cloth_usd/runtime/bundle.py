@@ -150,7 +150,8 @@ class ModelBundle:
         return self.path / self.manifest["models"][tier.value]["file"]
 
     def session(self, tier: Tier | str, *, prefer_gpu: bool = True) -> ModelSession:
-        """The (cached) onnxruntime session of ``tier``; raises BundleError if not shipped."""
+        """The (cached) onnxruntime session of ``tier`` (its threads spinning after a run only for
+        :data:`SPINNING_TIERS`); raises BundleError if not shipped."""
         tier = Tier(tier)
         if tier not in self.tiers:
             raise BundleError(f"{self.path}: bundle '{self.name}' has no '{tier.value}' model "
