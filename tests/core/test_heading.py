@@ -75,6 +75,7 @@ def test_the_turn_is_the_yaw_matrices_about_the_pelvis():
         np.testing.assert_allclose(turned, np.einsum("tab,tnb->tna", yaw_matrices(yaw), points - pivot) + pivot,
                                    rtol=0, atol=1e-15)
 
+
 def _wavy_coarse(feats, graph):
     """A stand-in model that reads absolute directions: body normal and position (and, with
     the contact features, the nearest body normal and the distance to it)."""
