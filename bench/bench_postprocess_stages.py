@@ -6,11 +6,12 @@ measured after each step of the post-process: the models' garment, after the str
 (``--rounds``, each a row, at ``--limit``; a bake runs
 :data:`~cloth_usd.core.postprocess.STRAIN_ITERATIONS` rounds at
 :data:`~cloth_usd.core.postprocess.STRAIN_LIMIT`) and after the push out of the body that follows
-it, and the whole post-process as a bake runs it (``pipeline.post_process``: a frame the limit and
+it, and the whole post-process (``pipeline.post_process``: a frame the limit and
 the push leave more stretched than the models made it is pushed without the limit, as is one where the
 limit would move more than 1% of the vertices past
-:data:`~cloth_usd.core.postprocess.LIMIT_MOVE_BOUND`). Per row, over
-every ``--every``-th frame:
+:data:`~cloth_usd.core.postprocess.LIMIT_MOVE_BOUND`), without and then with its last step, the lift of
+the triangles off the body (:class:`~cloth_usd.core.postprocess.TriangleLift`), as a bake runs it. Per
+row, over every ``--every``-th frame:
 
 - edge stretch against the rest garment: the median frame's 99th percentile, the worst frame's,
   the largest edge, and the frames with an edge longer than ``--long`` (1.5) times its rest;
@@ -21,7 +22,8 @@ every ``--every``-th frame:
 - the body through the garment, which the push (vertex by vertex) does not see: the body vertices
   within 1 cm of a garment triangle (one off the garment's open edges) that lie in front of it along
   their own normal, more than 1 mm, per frame (the specks of skin a close-up render shows through a
-  taut sleeve even when no garment vertex is inside the body);
+  taut sleeve even when no garment vertex is inside the body); and of those, the ones the rest garment
+  covers (:func:`~cloth_usd.core.postprocess.covered_at_rest`): a hand on a shirt's chest lies in front of it too;
 - each frame's largest vertex move from the models' garment (the median frame's and the most):
   the strain limiter's global solve can move a whole region to shorten its edges (a trouser leg
   drawn down off a thigh raised to the chest), and the frames whose 99th percentile of that move
@@ -43,14 +45,13 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_usd.core.association import incident_faces
 from cloth_usd.core.body import load_body_model, posed_vertices
 from cloth_usd.core.features import vertex_normals
 from cloth_usd.core.pipeline import pose_body, post_process
-from cloth_usd.core.postprocess import (LIMIT_CHECK_QUANTILE, LIMIT_MOVE_BOUND, STRAIN_LIMIT, _closest_surface,
-                                        limit_slides, mesh_edges, push_out_of_surface)
+from cloth_usd.core.postprocess import (LIMIT_CHECK_QUANTILE, LIMIT_MOVE_BOUND, STRAIN_LIMIT, body_ahead,
+                                        covered_at_rest, inner_triangles, limit_slides, mesh_edges,
+                                        push_out_of_surface)
 from cloth_usd.datagen.simulate import body_side, edge_ratios
-from cloth_usd.datagen.tshirt import _boundary_vertices
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
 from cloth_usd.runtime.garment import LearnedGarment
 from cloth_usd.usd.read import open_stage, read_scene
@@ -59,34 +60,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_mocap_tiers import _stage_poses  # noqa: E402  (the poses as the baker reads them)
 
 
-#: How near [m] a body vertex must be to the garment's surface to be measured against it.
-THROUGH_REACH = 0.01
-
-
-def inner_triangles(faces: np.ndarray, num_vertices: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(inner (M', 3), ring (N, D))``: a garment's triangles none of whose corners is on its
-    open edges, and the rows of them around each vertex (-1 padded), made once per garment."""
-    inner = faces[~np.isin(faces, _boundary_vertices(faces)).any(axis=1)]
-    return inner, incident_faces(inner, num_vertices)
-
-
-def body_through(garment: np.ndarray, inner: np.ndarray, ring: np.ndarray, body_points: np.ndarray,
-                 body_normals: np.ndarray, *, reach: float = THROUGH_REACH, depth: float = 1e-3) -> int:
-    """How many body vertices (V, 3) lie more than ``depth`` [m] in front of the garment (N, 3)
-    along their unit normals (V, 3): of those within ``reach`` of one of its ``inner`` triangles
-    (:func:`inner_triangles`), measured against the nearest."""
-    from scipy.spatial import cKDTree
-
-    index = cKDTree(garment).query(body_points, k=6, distance_upper_bound=3 * reach)[1]
-    found = index < len(garment)
-    found[found] = (ring[index[found]] >= 0).any(axis=1)  # a vertex with inner triangles around it
-    near = found.any(axis=1)
-    q = body_points[near]
-    closest, _ = _closest_surface(q, np.zeros(len(q), dtype=np.int64), np.where(found, index, 0)[near], found[near],
-                                  garment, np.zeros_like(garment), inner, ring)  # its normal is not needed
-    ok = np.linalg.norm(closest - q, axis=1) < reach
-    ahead = np.einsum("ic,ic->i", q[ok] - closest[ok], body_normals[near][ok])
-    return int(np.count_nonzero(ahead > depth))
+#: [m] how far in front of the garment a body vertex must lie to count as through it.
+THROUGH_DEPTH = 1e-3
 
 
 def main(argv=None) -> int:
@@ -123,19 +98,25 @@ def main(argv=None) -> int:
         bodies = posed_vertices(body, poses["betas"], model_poses, model_transl)
         normals = vertex_normals(bodies, body.faces)
         patch = learned.pair.patch
+        at_rest = posed_vertices(body, poses["betas"], np.zeros((1, 72)), np.zeros((1, 3)))[0]
+        covered = covered_at_rest(rest, poses["faces"], at_rest, vertex_normals(at_rest, body.faces))
 
         def row(stage_name, x, ms, before=None):
             s = edge_ratios(x, rest, edges)
             moved = np.linalg.norm(x - raw, axis=-1).max(axis=1)  # each frame's largest move from the models' garment
             p99 = np.percentile(s, 99, axis=1)
             side = np.stack([body_side(x[t], bodies[t], body.faces) for t in range(len(times))])
-            through = np.array([body_through(x[t], inner, ring, bodies[t], normals[t]) for t in range(len(times))])
+            ahead = np.stack([body_ahead(x[t], inner, ring, bodies[t], normals[t])[0] for t in range(len(times))])
+            through = np.count_nonzero(ahead > THROUGH_DEPTH, axis=1)
+            skin = np.count_nonzero((ahead > THROUGH_DEPTH) & covered, axis=1)
             r = {"shot": shot.stem, "bundle": bundle_dir.name, "stage": stage_name, "frames": len(times),
                  "ms_per_frame": ms, "p99_median": float(np.median(p99)), "p99_worst": float(p99.max()),
                  "max": float(s.max()), "frames_long": int(np.sum(s.max(axis=1) > args.long)),
                  "inside": float(np.mean(side < 0)), "inside_1mm": float(np.mean(side < -1e-3)),
                  "through_median": float(np.median(through)), "through_max": int(through.max()),
                  "frames_through": int(np.count_nonzero(through)),
+                 "covered_median": float(np.median(skin)), "covered_max": int(skin.max()),
+                 "frames_covered": int(np.count_nonzero(skin)),
                  "move_median_mm": float(np.median(1e3 * moved)), "move_max_mm": float(1e3 * moved.max()),
                  "frames_past_bound": int(np.sum(limit_slides(raw, x)))}  # the post-process's own rule
             if before is not None:  # the push: which long edges it made, and how
@@ -165,24 +146,31 @@ def main(argv=None) -> int:
             push_ms = 1e3 * (time.perf_counter() - start) / len(times)
             row(f"limited to {args.limit:g} x{rounds}, pushed", pushed, limit_ms + push_ms,
                 before=limited)
-            start = time.perf_counter()  # as a bake runs it: a frame the limit and the push tear is pushed alone
-            baked = post_process(learned.pair, posed, raw, margin=learned.margin, limiter=learned.limiter)[0]
-            row(f"limited to {args.limit:g} x{rounds}, pushed, checked (a bake)", baked,
+            start = time.perf_counter()  # a frame the limit and the push tear is pushed alone
+            checked = post_process(learned.pair, posed, raw, margin=learned.margin, limiter=learned.limiter)[0]
+            row(f"limited to {args.limit:g} x{rounds}, pushed, checked", checked,
+                1e3 * (time.perf_counter() - start) / len(times))
+            start = time.perf_counter()  # as a bake runs it, the triangles lifted last
+            baked = post_process(learned.pair, posed, raw, margin=learned.margin, limiter=learned.limiter,
+                                 lift=learned.lift)[0]
+            row(f"limited to {args.limit:g} x{rounds}, pushed, checked, lifted (a bake)", baked,
                 1e3 * (time.perf_counter() - start) / len(times))
     (out / "postprocess_stages.json").write_text(json.dumps(rows, indent=1))
     lines = ["| shot | stage | ms/frame | stretch p99 median / worst, max | frames with an edge > "
              f"{args.long} | long edges after the push: already before / one end pushed / torn | inside "
-             "(deeper than 1 mm) | body vertices through the garment: frames, median / most a frame | largest "
+             "(deeper than 1 mm) | body vertices through the garment: frames, median / most a frame | of those, "
+             "ones the rest garment covers | largest "
              "move from the models' garment, median / most a frame [mm] | frames that move more than "
              f"{100 * (1 - LIMIT_CHECK_QUANTILE):g}% of the vertices past {1e3 * LIMIT_MOVE_BOUND:g} mm |",
-             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         made = (f"{r['long_edges']}: {r['long_before_push']} / {r['long_one_end_pushed']} / {r['long_torn']}"
                 if "long_edges" in r else "")
         lines.append(f"| {r['shot']} | {r['stage']} | {r['ms_per_frame']:.1f} | {r['p99_median']:.3f} / "
                      f"{r['p99_worst']:.3f}, {r['max']:.2f} | {r['frames_long']} / {r['frames']} | {made} | "
                      f"{100 * r['inside']:.2f}% ({100 * r['inside_1mm']:.2f}%) | {r['frames_through']} / "
-                     f"{r['frames']}, {r['through_median']:g} / {r['through_max']} | {r['move_median_mm']:.0f} / "
+                     f"{r['frames']}, {r['through_median']:g} / {r['through_max']} | {r['frames_covered']} / "
+                     f"{r['frames']}, {r['covered_median']:g} / {r['covered_max']} | {r['move_median_mm']:.0f} / "
                      f"{r['move_max_mm']:.0f} | {r['frames_past_bound']} / {r['frames']} |")
     text = "\n".join(lines) + "\n"
     (out / "postprocess_stages.md").write_text(text)

@@ -1,7 +1,8 @@
 """Benchmark (not a test): the detail tier's strain limit against a Newton test set, setting by setting (issue #12).
 
 For a bundle and the simulated test set ``--data``, the detail tier is run as ``cloth-usd
-evaluate`` runs it (the models, the strain limiter, the push out of the body), once per
+evaluate`` runs it (the models, the strain limiter, the push out of the body, the lift of its
+triangles off the body), once per
 ``--setting`` ``LIMIT/ROUNDS[/ANCHOR]`` (:class:`~cloth_usd.core.postprocess.StrainLimiter`: the
 longest an edge may be over its rest length, the rounds, the weight holding each vertex where the
 models put it; default anchor :data:`~cloth_usd.core.postprocess.STRAIN_ANCHOR`); ``none`` runs it
@@ -76,7 +77,8 @@ def main(argv=None) -> int:
             limiter = None if setting is None else learned.strain_limiter(
                 limit=setting[0], iterations=setting[1], anchor=setting[2])  # factored once a garment, as a bake does
             start = time.perf_counter()
-            x = post_process(learned.pair, posed, raw, margin=learned.margin, limiter=limiter)[0]
+            x = post_process(learned.pair, posed, raw, margin=learned.margin, limiter=limiter,
+                             lift=learned.lift)[0]
             seconds[name] += time.perf_counter() - start
             errors[name][split].append(np.linalg.norm(x - clip.positions, axis=2).mean(axis=1))
         print(f"{clip.name}: " + ", ".join(f"{name} {1e3 * errors[name][split][-1].mean():.2f} mm"

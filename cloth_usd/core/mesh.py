@@ -1,12 +1,12 @@
-"""Mesh operations on vertex arrays (numpy/scipy only): uniform Laplacian smoothing, vector lengths and
-cross products."""
+"""Mesh operations on vertex arrays (numpy/scipy only): uniform Laplacian smoothing, vector lengths,
+cross products and a mesh's open edges."""
 
 from __future__ import annotations
 
 import numpy as np
 from scipy import sparse
 
-__all__ = ["laplacian_smooth", "vector_lengths", "cross"]
+__all__ = ["laplacian_smooth", "vector_lengths", "cross", "boundary_vertices"]
 
 
 def vector_lengths(v: np.ndarray) -> np.ndarray:
@@ -30,6 +30,15 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     out[..., 1] = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
     out[..., 2] = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
     return out
+
+
+def boundary_vertices(faces: np.ndarray) -> np.ndarray:
+    """(B,) int64 the sorted vertices on the open edges of triangles ``faces`` (M, 3) (an edge of one
+    triangle only): a garment's hems, cuffs and neckline."""
+    f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
+    edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    uniq, counts = np.unique(edges, axis=0, return_counts=True)
+    return np.unique(uniq[counts == 1])
 
 
 def _uniform_laplacian(faces: np.ndarray, n: int) -> sparse.csr_matrix:

@@ -40,8 +40,8 @@ from .fit import FIT_LIMIT, FitModel, pair_distances
 from .garment_inputs import skin_displaced
 from .graph import MeshGraph, build_graph
 from .heading import Heading, heading_frame
-from .postprocess import (DEFAULT_MARGIN, LIMIT_CHECK_TOLERANCE, StrainLimiter, limit_slides, push_out_of_surface,
-                          search_tree)
+from .postprocess import (DEFAULT_MARGIN, LIMIT_CHECK_TOLERANCE, StrainLimiter, TriangleLift, limit_slides,
+                          push_out_of_surface, search_tree)
 from .scene import Category
 from .skinning import SkinBinding, bind_worn, skin_garment
 from .smpl import JOINT_NAMES
@@ -360,11 +360,14 @@ def coarse_base_points(body: BodyModel, pair: GarmentPair, posed: PosedBody, pos
 
 
 def post_process(pair: GarmentPair, posed: PosedBody, points: np.ndarray, *, margin: float = DEFAULT_MARGIN,
-                 limiter: StrainLimiter | None = None, trees: list | None = None) -> tuple[np.ndarray, np.ndarray]:
+                 limiter: StrainLimiter | None = None, lift: TriangleLift | None = None,
+                 trees: list | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The post-process of a batch of the models' garment ``points`` (T, N, 3) [m]: the strain
     ``limiter`` first (None: none), then the push out of the posed body under the garment
     (:func:`~cloth_usd.core.postprocess.push_out_of_surface`, ``margin`` [m] in front of it;
-    ``trees``: :func:`contact_trees` of ``posed`` when the caller built them already).
+    ``trees``: :func:`contact_trees` of ``posed`` when the caller built them already), then the
+    ``lift`` of the garment's triangles off the body vertices in front of them
+    (:class:`~cloth_usd.core.postprocess.TriangleLift`; None: none).
 
     A frame whose vertices the limit would move too far
     (:func:`~cloth_usd.core.postprocess.limit_slides`: a region, not a spike pulled back) is pushed
@@ -379,8 +382,11 @@ def post_process(pair: GarmentPair, posed: PosedBody, points: np.ndarray, *, mar
     and the push tears it.
 
     Returns:
-        ``(points (T, N, 3) float64 [m], moved (T,) int64)``.
+        ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the garment and, per frame, how many
+        vertices the push moved plus how many the lift moved.
     """
+    if lift is not None and trees is None:
+        trees = contact_trees(pair, posed)  # the push and the lift's check search them
 
     def push(m: np.ndarray, frames: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         at = slice(None) if frames is None else frames
@@ -389,17 +395,22 @@ def post_process(pair: GarmentPair, posed: PosedBody, points: np.ndarray, *, mar
                                    pair.patch.contact, margin=margin, rings=pair.patch.rings, trees=picked)
 
     if limiter is None:
-        return push(points)
-    points = np.asarray(points)
-    limited = limiter(points)
-    slides = limit_slides(points, limited)
-    out, moved = push(np.where(slides[:, None, None], points, limited))
-    after = limiter.stretch(out)
-    worse = np.flatnonzero(~slides & (after > limiter.stretch(points) + LIMIT_CHECK_TOLERANCE))
-    if worse.size:
-        alone, alone_moved = push(points[worse], worse)
-        better = limiter.stretch(alone) < after[worse]
-        out[worse[better]], moved[worse[better]] = alone[better], alone_moved[better]
+        out, moved = push(points)
+    else:
+        points = np.asarray(points)
+        limited = limiter(points)
+        slides = limit_slides(points, limited)
+        out, moved = push(np.where(slides[:, None, None], points, limited))
+        after = limiter.stretch(out)
+        worse = np.flatnonzero(~slides & (after > limiter.stretch(points) + LIMIT_CHECK_TOLERANCE))
+        if worse.size:
+            alone, alone_moved = push(points[worse], worse)
+            better = limiter.stretch(alone) < after[worse]
+            out[worse[better]], moved[worse[better]] = alone[better], alone_moved[better]
+    if lift is not None:
+        out, lifted = lift(out, posed.patch_points, posed.patch_normals, pair.patch.faces, pair.patch.contact,
+                           rings=pair.patch.rings, trees=trees)
+        moved = moved + lifted
     return out, moved
 
 
@@ -410,7 +421,8 @@ GarmentFn = Callable[[np.ndarray], np.ndarray]
 
 def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.ndarray,
                       model: GarmentFn, *, batch_size: int = 16, margin: float = DEFAULT_MARGIN,
-                      postprocess: bool = True, limiter: StrainLimiter | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      postprocess: bool = True, limiter: StrainLimiter | None = None,
+                      lift: TriangleLift | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Animate a garment with its own model: the model reads the pose with the heading taken
     out (so a turned character gets the same garment turned), its displacement of the unposed
     garment is skinned with the world pose, then the post-process (as :func:`run_tiers`).
@@ -423,6 +435,7 @@ def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, tra
         postprocess: False leaves the model's garment as it made it.
         limiter: the post-process's first step, which shortens the edges stretched past its
             limit (:class:`~cloth_usd.core.postprocess.StrainLimiter`); None: none.
+        lift: the post-process's last step (:class:`~cloth_usd.core.postprocess.TriangleLift`); None: none.
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``.
     """
@@ -439,7 +452,7 @@ def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, tra
         m = skin_displaced(pair.binding, poses[lo:hi], transl[lo:hi], body.parents, d)
         if postprocess:
             posed = pose_body(body, pair, poses[lo:hi], transl[lo:hi])
-            points[lo:hi], moved[lo:hi] = post_process(pair, posed, m, margin=margin, limiter=limiter)
+            points[lo:hi], moved[lo:hi] = post_process(pair, posed, m, margin=margin, limiter=limiter, lift=lift)
         else:
             points[lo:hi] = m
     return points, moved
@@ -449,7 +462,7 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
               coarse: CoarseFn, detail: DetailFn | None = None, *, batch_size: int = 16,
               margin: float = DEFAULT_MARGIN, form: CoarseForm = CoarseForm(),
               skinned: np.ndarray | None = None, postprocess: bool = True,
-              limiter: StrainLimiter | None = None) -> tuple[np.ndarray, np.ndarray]:
+              limiter: StrainLimiter | None = None, lift: TriangleLift | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Animate a garment with a coarse model and, if given, a detail model.
 
     ``M_coarse = base + coarse(...)`` (``base`` ``I M_b`` or the skinned garment:
@@ -473,6 +486,7 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
             starts from: how far into the body they put it); ``moved`` is then all zero.
         limiter: the post-process's first step, which shortens the edges stretched past its
             limit (:class:`~cloth_usd.core.postprocess.StrainLimiter`); None: none.
+        lift: the post-process's last step (:class:`~cloth_usd.core.postprocess.TriangleLift`); None: none.
     Returns:
         ``(points (T, N, 3) float64 [m], moved (T,) int64)``: the garment per frame and
         how many vertices the post-process moved in each.
@@ -504,7 +518,8 @@ def run_tiers(body: BodyModel, pair: GarmentPair, poses: np.ndarray, transl: np.
             feats, attrs = detail_model_inputs(pair, m, posed, poses[lo:hi], transl[lo:hi])
             m = m + detail(feats, attrs, pair.graph)
         if postprocess:
-            points[lo:hi], moved[lo:hi] = post_process(pair, posed, m, margin=margin, limiter=limiter, trees=trees)
+            points[lo:hi], moved[lo:hi] = post_process(pair, posed, m, margin=margin, limiter=limiter, lift=lift,
+                                                       trees=trees)
         else:
             points[lo:hi] = m
     return (points if frame is None else frame.to_world(points)), moved

@@ -32,7 +32,8 @@ class GarmentReport:
     fit: tuple[float, ...] | None = None
     """The garment-body pair's fit attribute alpha (learned tiers only)."""
     postprocess_moved: int = 0
-    """Vertex-frames the post-process pushed out of the body (summed over frames)."""
+    """Vertex-frames the post-process pushed out of the body, plus those the detail tier's lift moved off it
+    (summed over frames)."""
     max_displacement_mm: float = 0.0
     """Largest distance of a baked vertex from its rest position, root translation
     removed, over all frames [mm] (canonical body frame)."""

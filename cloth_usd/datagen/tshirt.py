@@ -15,6 +15,7 @@ import numpy as np
 
 from ..core.association import associate
 from ..core.body import BodyModel, shape_body
+from ..core.mesh import boundary_vertices
 from ..errors import ClothUsdError
 
 __all__ = ["TShirtParams", "make_tshirt", "tshirt_variants"]
@@ -106,17 +107,11 @@ def _submesh(v: np.ndarray, f: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray
     return np.asarray(part.vertices), np.asarray(part.faces)
 
 
-def _boundary_vertices(faces: np.ndarray) -> np.ndarray:
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    uniq, counts = np.unique(edges, axis=0, return_counts=True)
-    return np.unique(uniq[counts == 1])
-
-
 def _snap_cuts(v: np.ndarray, faces: np.ndarray, joints: np.ndarray, p: TShirtParams,
                hem_y: float) -> np.ndarray:
     """Move boundary vertices onto their cut: the hem plane, the sleeve-end planes."""
     v = v.copy()
-    rim = _boundary_vertices(faces)
+    rim = boundary_vertices(faces)
     sleeve_x = np.abs(joints[[_L_SHOULDER, _R_SHOULDER], 0]).mean() + p.sleeve
     at_sleeve = rim[np.abs(v[rim, 0]) > sleeve_x - 0.05]
     at_hem = rim[(v[rim, 1] < hem_y + 0.05) & (np.abs(v[rim, 0]) < sleeve_x - 0.05)]

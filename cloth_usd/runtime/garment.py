@@ -19,9 +19,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..core.body import BodyModel
+from ..core.features import vertex_normals
 from ..core.graph import MeshGraph
 from ..core.pipeline import GarmentPair, prepare_pair, run_tiers
-from ..core.postprocess import STRAIN_LIMIT, StrainLimiter, check_strain_limit, garment_margin
+from ..core.postprocess import STRAIN_LIMIT, StrainLimiter, TriangleLift, check_strain_limit, garment_margin
 from ..core.scene import Tier
 from ..core.skinning import SkinBinding
 from ..core.smpl import NUM_JOINTS
@@ -39,7 +40,8 @@ class LearnedFrames:
     points: np.ndarray
     """(T, N, 3) float64 garment points [m], internal world frame."""
     moved: np.ndarray
-    """(T,) int64 vertices the post-process pushed out of the body, per frame."""
+    """(T,) int64 vertices the post-process pushed out of the body, plus those the detail tier's lift
+    moved, per frame."""
 
 
 class LearnedGarment:
@@ -60,17 +62,21 @@ class LearnedGarment:
             times their rest length (:class:`~cloth_usd.core.postprocess.StrainLimiter`); None: it
             does not. The coarse tier, the fast one, is not limited: the limit and the pushes out
             of the body it leads to take 10-20 ms a frame on a 3500-vertex shirt.
+        lift: the detail tier's post-process ends with a lift of the garment's triangles off the body
+            vertices in front of them (:class:`~cloth_usd.core.postprocess.TriangleLift`); False: it
+            does not.
     """
 
     def __init__(self, bundle: ModelBundle, body: BodyModel, betas: np.ndarray, rest_points: np.ndarray,
                  faces: np.ndarray, *, binding: SkinBinding | None = None,
-                 margin: float | None = None, strain_limit: float | None = STRAIN_LIMIT) -> None:
+                 margin: float | None = None, strain_limit: float | None = STRAIN_LIMIT, lift: bool = True) -> None:
         self.bundle = bundle
         self.body = body
         self.margin = float(margin) if margin is not None else garment_margin(rest_points, faces)
         if strain_limit is not None:  # checked now, though the limiter is built when the detail tier first runs
             check_strain_limit(strain_limit)
         self._limit = (np.asarray(rest_points, dtype=np.float64), np.asarray(faces), strain_limit)
+        self._lift = lift
         if bundle.garment is not None and not bundle.garment.serves(len(rest_points), faces):
             raise BundleError(f"{bundle.path}: bundle '{bundle.name}' was trained for one garment of "
                               f"{bundle.garment.vertices} vertices, and this garment ({len(rest_points)} vertices) is "
@@ -102,6 +108,17 @@ class LearnedGarment:
         runs: a coarse bake never builds it."""
         limit = self._limit[2]
         return self.strain_limiter(limit=limit) if limit is not None else None
+
+    @functools.cached_property
+    def lift(self) -> TriangleLift | None:
+        """The detail tier's lift of the triangles off the body (None: none), made when the detail
+        tier first runs."""
+        if not self._lift:
+            return None
+        patch = self.pair.patch
+        under = patch.vertices[patch.contact]  # the candidates the lift is called with, in their order
+        normals = vertex_normals(self.pair.v_shaped, self.body.faces)
+        return TriangleLift(self._limit[1], self._limit[0], self.pair.v_shaped[under], normals[under])
 
     def strain_limiter(self, **settings) -> StrainLimiter:
         """A :class:`~cloth_usd.core.postprocess.StrainLimiter` of this garment's rest (``settings``:
@@ -142,7 +159,7 @@ class LearnedGarment:
         transl = np.asarray(transl, dtype=np.float64).reshape(-1, 3)
         if transl.shape[0] != poses.shape[0]:
             raise ArgumentError(f"poses has {poses.shape[0]} frames, transl {transl.shape[0]}")
-        limiter = self.limiter if tier is Tier.DETAIL else None
+        limiter, lift = (self.limiter, self.lift) if tier is Tier.DETAIL else (None, None)
         if self.own:
             from ..core.pipeline import run_garment_model
             from ..core.garment_inputs import garment_displacement_inputs
@@ -156,7 +173,8 @@ class LearnedGarment:
                 return sum(s.run(inputs)[OUTPUT] for s in sessions)
 
             points, moved = run_garment_model(self.body, self.pair, poses, transl, run_model, batch_size=batch_size,
-                                              margin=self.margin, postprocess=postprocess, limiter=limiter)
+                                              margin=self.margin, postprocess=postprocess, limiter=limiter,
+                                              lift=lift)
             return LearnedFrames(points=points, moved=moved)
         coarse = self.bundle.session(Tier.COARSE)
         detail = self.bundle.session(Tier.DETAIL) if tier is Tier.DETAIL else None
@@ -170,5 +188,5 @@ class LearnedGarment:
         points, moved = run_tiers(self.body, self.pair, poses, transl, run_coarse,
                                   run_detail if detail is not None else None, batch_size=batch_size,
                                   margin=self.margin, form=self.bundle.form, skinned=skinned,
-                                  postprocess=postprocess, limiter=limiter)
+                                  postprocess=postprocess, limiter=limiter, lift=lift)
         return LearnedFrames(points=points, moved=moved)

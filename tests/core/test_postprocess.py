@@ -288,3 +288,84 @@ def test_the_strain_limiter_leaves_a_non_finite_frame_for_the_guard_and_checks_i
         StrainLimiter(rest, faces, limit=1.0)
     with pytest.raises(ArgumentError, match=r"expected points \(T, 16, 3\)"):
         limiter(rest[None, :5])
+
+
+def _lift_scene(arm: bool = False):
+    """A 5 x 5 garment sheet (2 cm cells) 2 mm above a flat body (normals +z) whose vertex under the
+    middle of an inner garment triangle is raised 4 mm, 2 mm in front of the garment; with ``arm``,
+    another body part lies 2 mm above the garment (normals -z), as an arm over a shirt's side.
+    Returns ``(garment (1, 25, 3), faces, body (1, V, 3), normals (1, V, 3), body_faces, bump)``."""
+    xs = np.arange(5) * 0.02
+    garment, faces, _ = _sheet(xs, xs, 0.002)
+    corners = faces[12]  # an inner triangle: none of its corners is on the sheet's rim
+    assert not np.isin(corners, [0, 1, 2, 3, 4, 5, 9, 10, 14, 15, 19, 20, 21, 22, 23, 24]).any()
+    centre = garment[corners].mean(axis=0)
+    body = _sheet(np.arange(-1, 10) * 0.01, np.arange(-1, 10) * 0.01, 0.0)
+    bump = int(np.argmin(np.linalg.norm(body[0][:, :2] - centre[:2], axis=1)))
+    body[0][bump] = [*centre[:2], 0.004]
+    if arm:
+        over = _sheet(xs, xs, 0.004)
+        body = _two_parts(body, (over[0], over[1][:, ::-1], -over[2]))
+    return garment[None], faces, body[0][None], body[2][None], body[1], bump
+
+
+def test_the_lift_raises_a_triangle_off_the_body_in_front_of_it_and_leaves_the_rest():
+    from cloth_usd.core.postprocess import LIFT_MARGIN, TriangleLift
+
+    garment, faces, body, normals, body_faces, bump = _lift_scene()
+    lift = TriangleLift(faces, garment[0], body[0], normals[0])
+    out, lifted = lift(garment, body, normals, body_faces, np.arange(body.shape[1]))
+    moved = np.flatnonzero(np.linalg.norm(out[0] - garment[0], axis=1) > 0)
+    assert moved.tolist() == sorted(faces[12]) and lifted.tolist() == [3]
+    np.testing.assert_allclose(out[0, moved, :2], garment[0, moved, :2])  # along the body's normal (+z)
+    # the bump is now LIFT_MARGIN behind the triangle: barycentric weights (1/3 each) over their squares
+    height = out[0, faces[12], 2].mean()
+    assert height - body[0, bump, 2] == pytest.approx(LIFT_MARGIN, abs=1e-9)
+    # a triangle facing away from the body vertex (a sleeve's inner side next to the torso) stays
+    flipped, none = TriangleLift(faces[:, ::-1], garment[0], body[0], normals[0])(garment, body, normals, body_faces,
+                                                                                  np.arange(body.shape[1]))
+    np.testing.assert_array_equal(flipped, garment)
+    assert none.tolist() == [0]
+
+
+def test_a_lift_that_would_put_the_cloth_into_another_part_of_the_body_or_stretch_it_is_taken_back():
+    from cloth_usd.core.postprocess import TriangleLift
+
+    garment, faces, body, normals, body_faces, _ = _lift_scene(arm=True)
+    lift = TriangleLift(faces, garment[0], body[0], normals[0])
+    out, lifted = lift(garment, body, normals, body_faces, np.arange(body.shape[1]))
+    np.testing.assert_array_equal(out, garment)  # 2.5 mm up would be 0.5 mm into the arm
+    assert lifted.tolist() == [0]
+    garment, _, body, normals, body_faces, _ = _lift_scene()  # no arm: the lift is kept
+    broken = garment.copy()
+    broken[0, 0, 0] = np.nan
+    kept = TriangleLift(faces, garment[0], body[0], normals[0])
+    two, lifted = kept(np.concatenate([broken, garment]), np.repeat(body, 2, axis=0), np.repeat(normals, 2, axis=0),
+                       body_faces, np.arange(body.shape[1]))
+    np.testing.assert_array_equal(two[0], broken[0])  # a non-finite frame is left for the guard
+    assert lifted.tolist() == [0, 3]
+    # nor is one that would stretch an edge past 1.5 times its rest length: cut a third smaller about the
+    # lifted triangle, the sheet's edges are 1.49 times their rest, and the 2.5 mm lift would make those
+    # off the triangle 1.50 (cut to 0.68, 1.47 and 1.48: kept)
+    centre = garment[0, faces[12]].mean(axis=0)
+    for cut, kept in ((0.67, 0), (0.68, 3)):
+        shrunk = TriangleLift(faces, centre + (garment[0] - centre) * [cut, cut, 1.0], body[0], normals[0])
+        assert shrunk(garment, body, normals, body_faces, np.arange(body.shape[1]))[1].tolist() == [kept]
+    with pytest.raises(ArgumentError, match=r"points \(T, 25, 3\)"):
+        lift(garment[:, :5], body, normals, body_faces, np.arange(body.shape[1]))
+    with pytest.raises(ArgumentError, match="candidates"):
+        lift(garment, body, normals, body_faces, np.arange(5))
+
+
+def test_the_skin_a_rest_garment_covers_is_what_lies_straight_under_it():
+    from cloth_usd.core.postprocess import covered_at_rest
+
+    xs = np.arange(5) * 0.02
+    garment, faces, _ = _sheet(xs, xs, 0.01)  # 1 cm over the body
+    body = np.array([[0.04, 0.04, 0.0],    # under the middle
+                     [0.04, 0.04, 0.015],  # over it (through it at rest): covered too
+                     [0.12, 0.04, 0.0],    # 4 cm past the sheet's inner triangles (1 cm past its rim)
+                     [0.04, 0.04, -0.05],  # 6 cm under it: past the reach
+                     [0.04, 0.04, 0.0]])
+    normals = np.array([[0, 0, 1], [0, 0, 1], [0, 0, 1], [0, 0, 1], [1, 0, 0.0]])  # the last one's faces sideways
+    assert covered_at_rest(garment, faces, body, normals).tolist() == [True, True, False, False, False]
