@@ -639,7 +639,7 @@ class TriangleLift:
         near = np.flatnonzero(index < g.shape[0])
         # a point of the triangles around a vertex lies in their corners' convex hull, so a body vertex
         # behind all those corners along its normal is behind each triangle: only the others are measured
-        # (a shirt 12 mm off the body: a tenth of them)
+        # (on the sample shirt's salsa 25 a quarter of them, on a tight top and tight trousers 68-70%)
         ring = self.ring_corners[index[near]]  # (R, C), -1 padded
         ahead = np.einsum("rkc,rc->rk", bp[near, None] - g[ring], bn[near])
         near = near[np.max(np.where(ring >= 0, ahead, -np.inf), axis=1) > -self.margin]
