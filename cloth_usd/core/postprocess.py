@@ -616,11 +616,13 @@ class TriangleLift:
         q[frame, slot] = p[frame, row] + move
         pushed = push_out_of_surface(q, b, n, body_faces, cand, margin=0.0, rings=rings, trees=trees)[0]
         keep = (pushed[frame, slot] == q[frame, slot]).all(axis=1)
-        # nor may it stretch an edge past LIFT_STRETCH times its rest length, and further than it was
-        e, lifted_p = self.all_edges, p.copy()
+        # nor may it stretch an edge past LIFT_STRETCH times its rest length, and further than it was (only
+        # an edge at a lifted vertex can)
+        at_lifted = np.isin(self.all_edges, row).any(axis=1)
+        e, rest_lengths, lifted_p = self.all_edges[at_lifted], self.rest_lengths[at_lifted], p.copy()
         lifted_p[frame, row] = q[frame, slot]
         after = vector_lengths(lifted_p[:, e[:, 1]] - lifted_p[:, e[:, 0]])
-        at, over = np.nonzero((after > LIFT_STRETCH * self.rest_lengths)
+        at, over = np.nonzero((after > LIFT_STRETCH * rest_lengths)
                               & (after > vector_lengths(p[:, e[:, 1]] - p[:, e[:, 0]])))
         stretched = np.zeros(p.shape[:2], dtype=bool)
         stretched[at, e[over, 0]] = stretched[at, e[over, 1]] = True
