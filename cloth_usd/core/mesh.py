@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
-__all__ = ["laplacian_smooth", "vector_lengths", "cross", "boundary_vertices"]
+__all__ = ["laplacian_smooth", "vector_lengths", "cross", "open_edges", "boundary_vertices"]
 
 
 def vector_lengths(v: np.ndarray) -> np.ndarray:
@@ -32,13 +32,18 @@ def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return out
 
 
-def boundary_vertices(faces: np.ndarray) -> np.ndarray:
-    """(B,) int64 the sorted vertices on the open edges of triangles ``faces`` (M, 3) (an edge of one
-    triangle only): a garment's hems, cuffs and neckline."""
+def open_edges(faces: np.ndarray) -> np.ndarray:
+    """(B', 2) int64 the open edges of triangles ``faces`` (M, 3), each an edge of one triangle only
+    (a garment's hems, cuffs and neckline), sorted, lower vertex first."""
     f = np.asarray(faces, dtype=np.int64).reshape(-1, 3)
     edges = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
     uniq, counts = np.unique(edges, axis=0, return_counts=True)
-    return np.unique(uniq[counts == 1])
+    return uniq[counts == 1]
+
+
+def boundary_vertices(faces: np.ndarray) -> np.ndarray:
+    """(B,) int64 the sorted vertices on the :func:`open_edges` of triangles ``faces`` (M, 3)."""
+    return np.unique(open_edges(faces))
 
 
 def _uniform_laplacian(faces: np.ndarray, n: int) -> sparse.csr_matrix:

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..core.association import associate
 from ..core.body import BodyModel, shape_body
-from ..core.mesh import boundary_vertices
+from ..core.mesh import boundary_vertices, open_edges
 from ..errors import ClothUsdError
 
 __all__ = ["TShirtParams", "make_tshirt", "tshirt_variants"]
@@ -65,9 +65,7 @@ class TShirtParams:
 def _count_rims(faces: np.ndarray) -> int:
     """Number of boundary loops of a triangle mesh."""
     trimesh = _trimesh()
-    edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
-    uniq, counts = np.unique(edges, axis=0, return_counts=True)
-    rim = uniq[counts == 1]
+    rim = open_edges(faces)
     return len(trimesh.graph.connected_components(rim)) if len(rim) else 0
 
 
