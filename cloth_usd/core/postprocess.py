@@ -261,6 +261,12 @@ def _closest_triangle(q: np.ndarray, offset: np.ndarray, near: np.ndarray, found
     """:func:`_closest_surface`'s search: ``(closest (R, 3), barycentric (R, 3), corners (R, 3))``,
     each of ``q``'s closest point, its weights and the triangle's corners (rows of ``points``)."""
     tri = np.where(found[..., None], ring[near], -1).reshape(q.shape[0], -1)  # (R, k * D), -1 padded
+    # neighbouring body vertices share triangles: each is measured once, at its first place (so that a tie
+    # goes where it went before)
+    order = np.argsort(tri, axis=1, kind="stable")
+    ranked = np.take_along_axis(tri, order, axis=1)
+    ranked[:, 1:][ranked[:, 1:] == ranked[:, :-1]] = -1
+    np.put_along_axis(tri, order, ranked, axis=1)
     r, c = np.nonzero(tri >= 0)
     corners = faces[tri[r, c]] + offset[r][:, None]
     closest, bary = closest_point_on_triangles(points[corners], q[r])

@@ -163,6 +163,37 @@ def test_the_surface_push_leaves_far_and_non_finite_vertices_and_checks_its_argu
         push_out_of_surface(garment, pts[None], normals[None], faces, only_floor, margin=-0.001)
 
 
+def test_the_surface_search_measures_each_triangle_around_the_nearest_body_vertices_once(monkeypatch):
+    from cloth_usd.core import postprocess
+    from cloth_usd.core.association import closest_point_on_triangles, incident_faces
+
+    pts, faces, _ = _corner()
+    ring = incident_faces(faces, len(pts))
+    rng = np.random.default_rng(3)
+    q = np.c_[rng.uniform(-0.03, 0.0, 40), rng.uniform(-0.01, 0.01, 40), rng.uniform(0.0, 0.03, 40)] \
+        + rng.normal(0.0, 0.004, (40, 3))
+    near = np.argsort(np.linalg.norm(q[:, None] - pts[None], axis=2), axis=1)[:, :4]  # neighbours: rings overlap
+    found = np.ones(near.shape, dtype=bool)
+    found[::5, 3] = False  # a neighbour not found: its ring is not searched
+    measured = []
+
+    def counted(tri, p):
+        measured.append(len(p))
+        return closest_point_on_triangles(tri, p)
+
+    monkeypatch.setattr(postprocess, "closest_point_on_triangles", counted)
+    closest, bary, corners = postprocess._closest_triangle(q, np.zeros(len(q), dtype=np.int64), near, found, pts,
+                                                           faces, ring)
+    around = [np.unique(ring[near[i][found[i]]]) for i in range(len(q))]
+    around = [a[a >= 0] for a in around]
+    assert measured == [sum(len(a) for a in around)]  # each triangle once, however many of the rings hold it
+    for i, a in enumerate(around):
+        c, _ = closest_point_on_triangles(pts[faces[a]], np.repeat(q[i:i + 1], len(a), axis=0))
+        best = np.linalg.norm(c - q[i], axis=1).min()
+        assert np.linalg.norm(closest[i] - q[i]) == pytest.approx(best, abs=1e-12)
+        np.testing.assert_allclose(bary[i] @ pts[corners[i]], closest[i], atol=1e-12)
+
+
 def _sheet(xs, ys, z):
     """A triangulated sheet over ``xs`` x ``ys`` at height ``z``, the body below it (normals
     +z). Returns ``(points (V, 3), faces (M, 3), normals (V, 3))``."""
