@@ -279,6 +279,44 @@ def test_a_fit_past_the_limit_is_clamped_and_warned_about(posed_stage, tmp_path,
     assert message in g.warnings and max(abs(a) for a in g.fit) == pytest.approx(FIT_LIMIT)
 
 
+def _suit(joints):
+    """The torso tube with two leg tubes hung from it (a suit in one piece), down to below the knees."""
+    points, faces = tube(joints)
+    parts = [points]
+    for side in (-1.0, 1.0):
+        hip = joints[2 if side < 0 else 1]
+        angles = np.linspace(0.0, 2 * np.pi, 12, endpoint=False)
+        ring = np.stack([0.07 * np.cos(angles), np.zeros(12), 0.07 * np.sin(angles)], axis=1)
+        heights = np.linspace(joints[0, 1] - 0.1, joints[0, 1] - 0.6, 8)
+        leg = np.concatenate([ring + [hip[0], h, hip[2]] for h in heights])
+        base = sum(len(p) for p in parts)
+        quads = [[base + r * 12 + a, base + r * 12 + (a + 1) % 12, base + (r + 1) * 12 + a] for r in range(7)
+                 for a in range(12)]
+        quads += [[base + r * 12 + (a + 1) % 12, base + (r + 1) * 12 + (a + 1) % 12, base + (r + 1) * 12 + a]
+                  for r in range(7) for a in range(12)]
+        faces = np.concatenate([faces, quads, [[0, base, base + 1]]])  # hung from the tube's lowest ring
+        parts.append(leg)
+    return np.concatenate(parts), faces
+
+
+def test_a_garment_with_legs_is_warned_about_for_a_category_bundle(body, tmp_path, caplog):
+    """A suit in one piece, in a T-shirt's place: the T-shirt bundle's models were trained on no such
+    garment, and a learned bake says so; the skinning tier and a plain tube say nothing."""
+    scene = write_stage(tmp_path / "s.usda", body, garment=_suit)
+    bundle = fake_bundle(tmp_path / "b", 0.005)
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
+        result = bake(scene, tmp_path / "c.usdc", tier="coarse", models=bundle)
+    (message,) = [m for m in _warnings(caplog) if "it has legs" in m]
+    assert f"<{PRIM}>: it has legs" in message and "which no tshirt the bundle 'fake-0.005' was trained on" in message
+    assert "its coarse tier reads it as one (models of its own: cloth-usd train-garment)" in message
+    assert message in result.garments[0].warnings
+    caplog.clear()
+    with caplog.at_level(logging.WARNING, logger="cloth_usd.baking"):
+        bake(scene, tmp_path / "k.usdc")  # skinning: no model to mislead
+        bake(write_stage(tmp_path / "t.usda", body), tmp_path / "t.usdc", tier="coarse", models=bundle)
+    assert not [m for m in _warnings(caplog) if "it has legs" in m]
+
+
 def _degenerate(joints):
     points, faces = tube(joints)
     return points, np.concatenate([faces, [[0, 0, 1], [5, 5, 5], [0, 16, 32]]])  # 2 zero-area, 1 sliver

@@ -16,9 +16,9 @@ from ..core.graph import directed_edges
 from ..core.guard import GuardLimits, check_frames, guard_limits
 from ..core.limits import BETA_LIMIT, BETA_MARGIN, betas_outside, betas_outside_range, pose_outliers
 from ..core.mesh import vector_lengths
-from ..core.plausibility import body_notes
+from ..core.plausibility import body_notes, has_legs
 from ..core.provenance import GarmentReport
-from ..core.scene import Character, Garment, Tier
+from ..core.scene import Category, Character, Garment, Tier
 from ..core.skinning import SkinBinding, bind_worn, skin_garment
 from ..errors import BundleError, GarmentError
 from ..runtime.bundle import ModelBundle
@@ -143,6 +143,11 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
                         f"{tier.value} tier reads it clamped to +-{FIT_LIMIT:g} (a bundle of its own: "
                         f"cloth-usd train-garment)")
     warnings += [f"{where}: {note}" for note in _rest_notes(bundle, rest, char.betas)] if learned is not None else []
+    if learned is not None and bundle.garment is None and Category(garment.category) is not Category.TROUSERS \
+            and has_legs(rest, garment.triangles, np.ones(len(rest), dtype=bool), learned.pair.joints[0]):
+        warnings.append(f"{where}: it has legs (two tubes below the hips: a suit or an overall in one piece), which no "
+                        f"{Category(garment.category).value} the bundle '{bundle.name}' was trained on has; its "
+                        f"{tier.value} tier reads it as one (models of its own: cloth-usd train-garment)")
     for w in warnings:
         log.warning("%s", w)
     poses, transl = motion.poses, motion.transl

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
-__all__ = ["laplacian_smooth", "vector_lengths", "cross", "open_edges", "boundary_vertices"]
+__all__ = ["laplacian_smooth", "vector_lengths", "cross", "open_edges", "boundary_vertices", "edge_components"]
 
 
 def vector_lengths(v: np.ndarray) -> np.ndarray:
@@ -83,3 +83,11 @@ def laplacian_smooth(positions: np.ndarray, faces: np.ndarray, *, iterations: in
             flat = flat + mu * (avg @ flat - flat)
     out = flat.reshape(n, num_t, 3).transpose(1, 0, 2).astype(pos.dtype if pos.dtype == np.float32 else np.float64)
     return out[0] if single else out
+
+
+def edge_components(num: int, edges: np.ndarray) -> np.ndarray:
+    """(num,) the connected part of each of ``num`` vertices joined by ``edges`` (E, 2)."""
+    from scipy.sparse.csgraph import connected_components
+
+    adj = sparse.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(num, num))
+    return connected_components(adj, directed=False)[1]

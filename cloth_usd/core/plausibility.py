@@ -18,12 +18,13 @@ import numpy as np
 from .association import surface_at
 from .body import BodyModel, shape_body
 from .features import vertex_normals
+from .mesh import edge_components
 from .skinning import SkinBinding
 from .smpl import JOINT_NAMES, PARENTS
 
 __all__ = ["HEIGHT_PER_HEAD_ANKLE", "SIZE_WARN", "SIZE_SMALL", "SIZE_REFUSE", "FAR_FROM_BONES", "FAR_FROM_BODY",
            "INSIDE_AT_REST", "INSIDE_DEPTH", "GarmentScale", "garment_scale", "scale_notes", "inside_at_rest",
-           "body_notes"]
+           "body_notes", "has_legs", "THIGH_BELOW_HIPS", "LEG_OPENING", "LEG_TOP", "LEG_SIDE"]
 
 #: Body height [m] per head-joint-to-mid-ankle distance [m]: 1.69 m / 1.46 m for the
 #: embedded SMPL-format body at zero betas (the head joint sits below the crown, the ankles
@@ -54,6 +55,19 @@ _HEAD = JOINT_NAMES.index("head")
 _ANKLES = [JOINT_NAMES.index("left_ankle"), JOINT_NAMES.index("right_ankle")]
 #: At most this many vertices are measured (evenly strided): the median needs no more.
 _SAMPLE = 4096
+#: [m] trousers' legs are looked for this far below the hip joints (the upper thigh, 7 cm
+#: below the crotch of the mean body): there a piece with legs parts into a left and a right
+#: tube, where a skirt or a coat stays one.
+THIGH_BELOW_HIPS = 0.2
+#: [m] shorts whose legs end above :data:`THIGH_BELOW_HIPS` (hot pants) are looked at this far
+#: above their lowest point: their leg openings.
+LEG_OPENING = 0.02
+#: [m] legs are looked for no higher than this below the hip joints (the mean body's crotch
+#: lies 13 cm below them): a piece that ends above it (a jacket, a crop top) has none.
+LEG_TOP = 0.1
+#: [m] a leg's middle lies at least this far to the side of the hip joints (a thigh's lies 8-10
+#: cm off): the front and back panels of a shirt with side slits do not make legs.
+LEG_SIDE = 0.03
 
 
 @dataclass(frozen=True)
@@ -154,3 +168,28 @@ def body_notes(binding: SkinBinding, body: BodyModel, betas: np.ndarray, body_pr
         notes.append(f"the garment lies {distance:.2f} m from the body <{body_prim}> on average at rest (a worn "
                      f"garment is within {FAR_FROM_BODY:g} m); check its cloth:body and rest points")
     return notes
+
+
+def has_legs(points: np.ndarray, tri: np.ndarray, piece: np.ndarray, pelvis: np.ndarray) -> bool:
+    """Whether the ``piece`` (N,) bool of the garment (``points`` (N, 3) [m], ``tri`` (M, 3)) has
+    legs: its vertices :data:`THIGH_BELOW_HIPS` below the ``pelvis`` joint (3,) [m] (or, for a
+    piece that ends above that, within :data:`LEG_OPENING` of its lowest point, if that lies
+    :data:`LEG_TOP` below the joint), joined by the mesh's edges between them, part into
+    pieces on the left and the right of it, at least :data:`LEG_SIDE` off. Thighs that touch
+    (a heavy body) do not join two legs, as a test of nearness to the midline would; edges
+    rather than whole triangles join them, so that a hem of one row of vertices is a ring."""
+    if not piece.any():
+        return False
+    level = max(pelvis[1] - THIGH_BELOW_HIPS, float(points[piece, 1].min()) + LEG_OPENING)
+    if level > pelvis[1] - LEG_TOP:
+        return False
+    below = piece & (points[:, 1] < level)
+    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
+    edges = edges[np.all(below[edges], axis=1)]
+    if not len(edges):
+        return False
+    used = np.unique(edges)
+    label = edge_components(len(points), edges)[used]
+    parts, sizes = np.unique(label, return_counts=True)
+    offsets = [float(np.median(points[used[label == c], 0]) - pelvis[0]) for c in parts[sizes >= 3]]
+    return {-1.0, 1.0} <= {float(np.sign(o)) for o in offsets if abs(o) >= LEG_SIDE}

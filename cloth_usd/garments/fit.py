@@ -42,6 +42,8 @@ from ..core.association import Association, associate
 from ..core.body import BodyModel, joint_transforms, lbs, shape_body
 from ..core.features import vertex_normals
 from ..core.heading import yaw_matrices
+from ..core.mesh import edge_components
+from ..core.plausibility import has_legs
 from ..core.rotations import axis_angle_to_matrix
 from .mhclo import Mhclo, bind_mhclo, load_hm08_map, mhclo_applies
 from .sew import push_out
@@ -66,19 +68,6 @@ FALL = 0.03
 DECORATION_SIZE = 0.1
 #: [m] a decoration further than this (its median vertex) from every kept piece is dropped.
 DECORATION_GAP = 0.02
-#: [m] trousers' legs are looked for this far below the hip joints (the upper thigh, 7 cm
-#: below the crotch of the mean body): there a piece with legs parts into a left and a right
-#: tube, where a skirt or a coat stays one.
-THIGH_BELOW_HIPS = 0.2
-#: [m] shorts whose legs end above :data:`THIGH_BELOW_HIPS` (hot pants) are looked at this far
-#: above their lowest point: their leg openings.
-LEG_OPENING = 0.02
-#: [m] legs are looked for no higher than this below the hip joints (the mean body's crotch
-#: lies 13 cm below them): a piece that ends above it (a jacket, a crop top) has none.
-LEG_TOP = 0.1
-#: [m] a leg's middle lies at least this far to the side of the hip joints (a thigh's lies 8-10
-#: cm off): the front and back panels of a shirt with side slits do not make legs.
-LEG_SIDE = 0.03
 
 
 @dataclass(frozen=True)
@@ -163,15 +152,7 @@ def triangulate_polygons(counts: np.ndarray, indices: np.ndarray) -> tuple[np.nd
 
 
 def _components(num: int, tri: np.ndarray) -> np.ndarray:
-    return _edge_components(num, np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]]]))
-
-
-def _edge_components(num: int, edges: np.ndarray) -> np.ndarray:
-    """(num,) the connected part of each of ``num`` vertices joined by ``edges`` (E, 2)."""
-    from scipy.sparse.csgraph import connected_components
-
-    adj = sparse.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(num, num))
-    return connected_components(adj, directed=False)[1]
+    return edge_components(num, np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]]]))
 
 
 def _box(points: np.ndarray) -> np.ndarray:
@@ -310,7 +291,7 @@ def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.
     names the file in the refusal when none does.
 
     A T-shirt keeps the pieces whose centre lies above the hips; trousers the pieces with
-    legs (:func:`_has_legs`: a bib overall has them, a coat or a jacket does not). A piece
+    legs (:func:`~cloth_usd.core.plausibility.has_legs`: a bib overall has them, a coat or a jacket does not). A piece
     smaller than :data:`DECORATION_SIZE` (a button, a buckle) goes with the kept piece it
     lies on, within :data:`DECORATION_GAP`."""
     label = _components(len(points), tri)
@@ -324,7 +305,7 @@ def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.
         if category == "tshirt":
             keep[sel] = float(np.median(points[sel, 1])) >= joints[_PELVIS, 1]
         else:  # trousers
-            keep[sel] = _has_legs(points, tri, sel, joints[_PELVIS])
+            keep[sel] = has_legs(points, tri, sel, joints[_PELVIS])
     decorations = [sel for sel in pieces if float(np.linalg.norm(np.ptp(points[sel], axis=0))) < DECORATION_SIZE]
     carriers = keep & ~np.logical_or.reduce(decorations) if decorations else keep
     tree = cKDTree(points[carriers]) if np.any(carriers) else None
@@ -334,31 +315,6 @@ def _keep_pieces(points: np.ndarray, tri: np.ndarray, category: str, joints: np.
         raise GarmentFitError(f"{source}: no piece of the mesh sits where a {category} is worn (every part was "
                               "dropped)")
     return keep, sum(not keep[sel].any() for sel in pieces)
-
-
-def _has_legs(points: np.ndarray, tri: np.ndarray, piece: np.ndarray, pelvis: np.ndarray) -> bool:
-    """Whether the ``piece`` (N,) bool of the garment (``points`` (N, 3) [m], ``tri`` (M, 3)) has
-    legs: its vertices :data:`THIGH_BELOW_HIPS` below the ``pelvis`` joint (3,) [m] (or, for a
-    piece that ends above that, within :data:`LEG_OPENING` of its lowest point, if that lies
-    :data:`LEG_TOP` below the joint), joined by the mesh's edges between them, part into
-    pieces on the left and the right of it, at least :data:`LEG_SIDE` off. Thighs that touch
-    (a heavy body) do not join two legs, as a test of nearness to the midline would; edges
-    rather than whole triangles join them, so that a hem of one row of vertices is a ring."""
-    if not piece.any():
-        return False
-    level = max(pelvis[1] - THIGH_BELOW_HIPS, float(points[piece, 1].min()) + LEG_OPENING)
-    if level > pelvis[1] - LEG_TOP:
-        return False
-    below = piece & (points[:, 1] < level)
-    edges = np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]])
-    edges = edges[np.all(below[edges], axis=1)]
-    if not len(edges):
-        return False
-    used = np.unique(edges)
-    label = _edge_components(len(points), edges)[used]
-    parts, sizes = np.unique(label, return_counts=True)
-    offsets = [float(np.median(points[used[label == c], 0]) - pelvis[0]) for c in parts[sizes >= 3]]
-    return {-1.0, 1.0} <= {float(np.sign(o)) for o in offsets if abs(o) >= LEG_SIDE}
 
 
 def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: BodyModel,
@@ -418,6 +374,14 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
                       turned_deg=round(float(turn) % 360.0, 1), arm_pose=frac,
                       align_mean_mm=round(score * 1e3, 1), **({"mhclo_skipped": why_not} if mhclo is not None else {}))
     keep, dropped = _keep_pieces(posed_points, tri, category, joints, src.source)
+    if category != "trousers" and has_legs(posed_points, tri, keep, joints[_PELVIS]):
+        # a MakeHuman suit (shirt and trousers in one piece) fitted as a T-shirt: tshirt-v6's models hung a
+        # sheet of cloth between its legs; its own (train-garment) hang two trouser legs
+        log.warning("%s: it has legs (two tubes below the hips: a suit or an overall in one piece), which no %s "
+                    "the %s bundles were trained on has, and their learned tiers read it as one; give it models "
+                    "of its own (cloth-usd train-garment) or bake it with --tier skinning", src.source, category,
+                    category)
+        report.update(legs=True)
     rest = _unpose(posed_points, weights, joints, pose, body.parents)
     # the pieces kept, renumbered; polygons with a dropped vertex go
     new_index = np.cumsum(keep) - 1

@@ -190,6 +190,29 @@ def test_tshirt_drops_the_trousers_piece(body):
     assert len(fitted.points) == len(top) and fitted.report["pieces_dropped"] == 2  # one per leg
 
 
+def test_a_shirt_with_legs_is_fitted_and_said_to_have_them(body, caplog):
+    # a suit in one piece, shirt and trousers (torso, upper arms, thighs and shins): a T-shirt or a
+    # dress bundle's models were trained on no such garment
+    suit, _, suit_f = _region_mesh(body, [0, 1, 2, 3, 4, 5, 6, 9, 16, 17])
+    top, _, top_f = _region_mesh(body, [3, 6, 9, 16, 17])
+    for pts, faces, legs in ((suit, suit_f, True), (top, top_f, False)):
+        src, _ = _pieces_source((pts, faces))
+        for category in ("tshirt", "dress", "trousers"):
+            caplog.clear()
+            with caplog.at_level("WARNING", logger="cloth_usd"):
+                try:
+                    fitted = fit_garment(src, category, np.zeros(10), body=body, config=FitConfig(drape_frames=0))
+                except GarmentFitError:  # trousers: the top has no piece with legs
+                    assert category == "trousers" and not legs
+                    continue
+            said = [r.getMessage() for r in caplog.records if "it has legs" in r.getMessage()]
+            expect = legs and category != "trousers"
+            assert len(said) == int(expect), (category, legs, said)
+            assert fitted.report.get("legs", False) is expect
+            if expect:
+                assert said[0].startswith("synthetic: ") and "train-garment" in said[0] and category in said[0]
+
+
 def _pieces_source(*pieces):
     pts = np.concatenate([p for p, _ in pieces])
     starts = np.cumsum([0] + [len(p) for p, _ in pieces])[:-1]
@@ -480,7 +503,8 @@ def _tube(centre, radius, top, bottom, around=48, rows=12):
 def _assert_legs_kept_and_skirt_dropped(body, left, right, skirt):
     """Two leg tubes (points, triangles) hung from a waist tube above the crotch make one piece
     with legs, which trousers keep; the ``skirt`` has none and goes."""
-    from cloth_usd.garments.fit import _has_legs, _keep_pieces
+    from cloth_usd.core.plausibility import has_legs
+    from cloth_usd.garments.fit import _keep_pieces
 
     _, joints = shape_body(body, np.zeros(10))
     pelvis = joints[0]
@@ -490,8 +514,8 @@ def _assert_legs_kept_and_skirt_dropped(body, left, right, skirt):
     tri = np.concatenate([tri, [[0, starts[1], starts[2]]]])  # the legs hang from the waist: one piece
     trousers = np.zeros(len(src.points), bool)
     trousers[:starts[3]] = True
-    assert _has_legs(src.points, tri, trousers, pelvis)
-    assert not _has_legs(src.points, tri, ~trousers, pelvis)
+    assert has_legs(src.points, tri, trousers, pelvis)
+    assert not has_legs(src.points, tri, ~trousers, pelvis)
     keep, dropped = _keep_pieces(src.points, tri, "trousers", joints, "synthetic")
     np.testing.assert_array_equal(keep, trousers)
     assert dropped == 1
@@ -511,7 +535,7 @@ def test_hot_pants_keep_their_short_legs_and_a_short_skirt_or_a_slit_shirt_goes(
     """Legs that end 15 cm below the hip joints (above where trousers' legs are looked for) are
     found at their openings, a hem of one row of vertices included; a skirt that ends there, and
     a shirt whose side slits part its hem into a front and a back panel, have none."""
-    from cloth_usd.garments.fit import _has_legs
+    from cloth_usd.core.plausibility import has_legs
 
     pelvis = shape_body(body, np.zeros(10))[1][0]
     # each leg two rows 5 cm apart: within 2 cm of the hem lies one row, no whole triangle
@@ -527,4 +551,4 @@ def test_hot_pants_keep_their_short_legs_and_a_short_skirt_or_a_slit_shirt_goes(
     side = np.abs(np.cos(a)) > 0.97  # the columns at the left and the right
     flaps = shirt_f[~np.any((low & side)[shirt_f], axis=1)]
     whole = np.ones(len(shirt), bool)
-    assert not _has_legs(shirt, flaps, whole, pelvis)
+    assert not has_legs(shirt, flaps, whole, pelvis)
