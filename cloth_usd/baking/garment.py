@@ -143,10 +143,10 @@ def bake_garment(writer, garment: Garment, char: Character, body: BodyModel, mot
                         f"{tier.value} tier reads it clamped to +-{FIT_LIMIT:g} (a bundle of its own: "
                         f"cloth-usd train-garment)")
     warnings += [f"{where}: {note}" for note in _rest_notes(bundle, rest, char.betas)] if learned is not None else []
-    if learned is not None and bundle.garment is None and Category(garment.category) is not Category.TROUSERS \
+    if learned is not None and bundle.garment is None and garment.category is not Category.TROUSERS \
             and has_legs(rest, garment.triangles, np.ones(len(rest), dtype=bool), learned.pair.joints[0]):
         warnings.append(f"{where}: it has legs (two tubes below the hips: a suit or an overall in one piece), which no "
-                        f"{Category(garment.category).value} the bundle '{bundle.name}' was trained on has; its "
+                        f"{garment.category.value} the bundle '{bundle.name}' was trained on has; its "
                         f"{tier.value} tier reads it as one (models of its own: cloth-usd train-garment)")
     for w in warnings:
         log.warning("%s", w)
