@@ -20,7 +20,9 @@ detail tier. Per bake, over every frame of the clip:
   also inside in the skinning tier's garment of that frame, and the share nearest to each
   body part (the body joint that skins the nearest body triangle's first corner most), so a
   clip's penetration reads as "the arms against the chest" rather than a bare percentage;
-- bending: the dihedral bending energy of the material (``nn.physics``; needs torch) [J].
+- bending: the dihedral bending energy of the material (``nn.physics``; needs torch) [J];
+- posed outside: the frames a bake warns are posed outside the joint angles the bundle was
+  trained on (``cloth_usd.core.limits.pose_outliers``, the bake's own test).
 
 Writes ``OUT/mocap_tiers.md`` (also printed) and ``OUT/mocap_tiers.json``.
 
@@ -42,6 +44,7 @@ from pxr import Sdf
 from cloth_usd.core.association import associate
 from cloth_usd.core.body import load_body_model, posed_vertices, shape_body
 from cloth_usd.core.frames import canonical_motion
+from cloth_usd.core.limits import pose_outliers
 from cloth_usd.core.smpl import JOINT_NAMES
 from cloth_usd.datagen.simulate import body_side, unique_edges
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
@@ -145,6 +148,7 @@ def main(argv=None) -> int:
                 runs.append((tier, bundle, cache))
         learned = {bundle: LearnedGarment(load_bundle(Path(bundle)), body, poses["betas"], poses["rest"], poses["faces"])
                    for bundle in bundles}  # one per bundle and clip: both tiers run it again before the post-process
+        outside = {bundle: pose_outliers(poses["poses"], limits=g.bundle.pose_limits) for bundle, g in learned.items()}
         for tier, bundle, cache in runs:
             pts, _, prov = _points(cache)
             report = _garment_report(prov)
@@ -172,14 +176,16 @@ def main(argv=None) -> int:
                    "inside_before": float(np.mean(before[0])), "inside_1mm_before": float(np.mean(before[1])),
                    "inside_after": float(np.mean(inside)), "inside_1mm_after": float(np.mean(deep)),
                    "bending_j": float(np.mean([energy(p) for p in pts[::5]])) if energy else float("nan"),
+                   "posed_outside": 0 if bundle is None or outside[bundle] is None
+                   else int(outside[bundle].frames.size),
                    **where}
             rows.append(row)
             print(json.dumps(row), flush=True)
     (out / "mocap_tiers.json").write_text(json.dumps(rows, indent=1))
     lines = ["| clip | frames | bundle | tier | guard: coarse / skinning | stretch vs rest p99 median / worst, max "
              "| vs skinning p99 median / worst, max | offset max mm | post-process moved / frame | inside before "
-             "(deeper than 1 mm) | inside after (deeper than 1 mm) | bending J |",
-             "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "(deeper than 1 mm) | inside after (deeper than 1 mm) | bending J | frames posed outside training |",
+             "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['clip']} | {r['frames']} | {r['bundle']} | {r['tier']} | {r['fallback_coarse']} / "
                      f"{r['fallback_skinning']} | {r['stretch_rest_p99_median']:.2f} / {r['stretch_rest_p99_worst']:.2f}, "
@@ -187,7 +193,7 @@ def main(argv=None) -> int:
                      f"{r['stretch_skin_p99_worst']:.2f}, {r['stretch_skin_max']:.2f} | {r['offset_max_mm']:.0f} | "
                      f"{r['postprocess_moved_per_frame']:.0f} | {100 * r['inside_before']:.2f}% "
                      f"({100 * r['inside_1mm_before']:.2f}%) | {100 * r['inside_after']:.2f}% ({100 * r['inside_1mm_after']:.2f}%) | "
-                     f"{r['bending_j']:.2e} |")
+                     f"{r['bending_j']:.2e} | {r['posed_outside'] if r['bundle'] != '-' else '-'} |")
     learned_rows = [r for r in rows if "inside_before_near" in r]
     if learned_rows:
         lines += ["", "Where the garment is inside the body before the post-process (every fifth frame):", "",

@@ -161,8 +161,11 @@ def _parser() -> argparse.ArgumentParser:
     tg.add_argument("--garment", metavar="PRIM", help="the garment prim (default: each stage's only garment)")
     tg.add_argument("--name", help="bundle name (default: the bundle folder's name)")
     tg.add_argument("--work", metavar="DIR", help="folder for the data config and the two runs (default: OUT.work)")
-    tg.add_argument("--motions", metavar="JSON", help="extra training motions: a JSON list of train_motions "
-                                                     "entries (procedural or {\"bvh\": ...}; see cloth-usd datagen)")
+    tg.add_argument("--motions", metavar="JSON", help="the real training motions beside the seven procedural ones: "
+                                                     "a JSON list of train_motions entries ({\"bvh\": ...} with "
+                                                     "--mocap, procedural, or {\"stored\": ...}; see cloth-usd "
+                                                     "datagen); [] for none (default: the 24 CMU stretches shipped "
+                                                     "with cloth-usd)")
     tg.add_argument("--test-motions", metavar="JSON", help="the held-out motions of the Newton test set config the "
                                                           "work folder gets (testset.json: cloth-usd datagen of it "
                                                           "simulates them alone), entries as --motions (default: a "
@@ -603,9 +606,9 @@ def _train_garment(args: argparse.Namespace) -> int:
                           sim_weight=args.sim_weight, sim_sequences=args.sim_sequences,
                           coarse_target=args.coarse_target, mirror=args.mirror)
 
-    def motion_list(flag: str, path: str | None) -> tuple:
+    def motion_list(flag: str, path: str | None) -> tuple | None:
         if not path:
-            return ()
+            return None
         try:
             found = json.loads(Path(path).read_text())
         except (OSError, ValueError) as exc:
@@ -615,7 +618,8 @@ def _train_garment(args: argparse.Namespace) -> int:
                                 f"{type(found).__name__}")
         return tuple(found)
 
-    motions, test_motions = motion_list("--motions", args.motions), motion_list("--test-motions", args.test_motions)
+    motions = motion_list("--motions", args.motions)
+    test_motions = motion_list("--test-motions", args.test_motions) or ()
     body = load_body_model()
     owns, prims = [], []
     for path in args.scene:

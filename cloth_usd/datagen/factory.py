@@ -31,7 +31,7 @@ from ..core.transfer import transfer_garment
 from .bodies import body_shapes
 from .dataset import MANIFEST_NAME, DatasetConfig, DatasetError, Job, Manifest, run_jobs
 from .floor import FLOOR_SPLIT, FloorSpec, floor_jobs
-from .mocap import MocapSpec, mocap_motion
+from .mocap import MocapSpec, mocap_motion, stored_motion
 from .simulate import SimConfig
 from .motion import MotionKind, MotionSpec, generate
 from .tshirt import make_tshirt, tshirt_variants
@@ -68,7 +68,9 @@ class FactoryConfig:
     train_motions: tuple[dict, ...] = _DEFAULT_TRAIN_MOTIONS
     """Per motion, the fields of a procedural :class:`~cloth_usd.datagen.motion.MotionSpec`, or
     of a :class:`~cloth_usd.datagen.mocap.MocapSpec` (an entry with a ``bvh`` key): a real clip,
-    eased in, whose warm-up frames training and evaluation leave out."""
+    eased in, whose warm-up frames training and evaluation leave out, or ``{"stored": name}``:
+    one of the CMU stretches shipped with the package (:func:`~cloth_usd.datagen.mocap.stored_motion`),
+    retargeted already, so no mocap folder is needed."""
     test_motions: tuple[dict, ...] = _DEFAULT_TEST_MOTIONS
     garment_vertices: int | None = None
     """Override every shirt's target vertex count (small data sets, tests)."""
@@ -162,7 +164,14 @@ def _check_speed(body, poses: np.ndarray, transl: np.ndarray, spec: MocapSpec, w
 def _motion(fields: dict, config: FactoryConfig, where: str, smpl_joints: np.ndarray, body=None) -> _Motion:
     if not isinstance(fields, dict):
         raise ArgumentError(f"{where}: expected a table of motion fields, got {fields!r}")
-    if "bvh" in fields:
+    if "stored" in fields:
+        extra = sorted(set(fields) - {"stored"})
+        if extra:
+            raise ArgumentError(f"{where}: a stored motion takes no other field than 'stored' (got {', '.join(extra)})")
+        m, fps = stored_motion(str(fields["stored"]))
+        poses, transl, warmup = m.poses, m.transl, m.warmup_frames
+        name, source = str(fields["stored"]), m.source
+    elif "bvh" in fields:
         try:
             spec = MocapSpec(**fields)
         except TypeError as exc:

@@ -22,18 +22,21 @@ Shape letters: T frames.
 from __future__ import annotations
 
 import hashlib
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from ..core.files import models_dir
 from ..core.heading import root_yaw, yaw_matrices
 from ..errors import ArgumentError, MotionFileError
 from .bvh import BVH_RIGS, read_bvh, retarget_bvh, rig_mapping, synthetic_first_frame, trim_bvh
 from .motion import blend_from_rest
 
-__all__ = ["MocapSpec", "MocapMotion", "mocap_motion"]
+__all__ = ["MocapSpec", "MocapMotion", "mocap_motion", "STORED_MOTIONS", "store_motions", "stored_motion",
+           "stored_motion_names"]
 
 
 @dataclass(frozen=True)
@@ -158,3 +161,77 @@ def _ramp_root(root: np.ndarray, frames: int) -> np.ndarray:
     k = np.arange(1, len(root))
     scale = np.where(k < frames, 0.5 - 0.5 * np.cos(np.pi * k / frames), 1.0)
     return np.concatenate([root[:1], root[:1] + np.cumsum(step * scale[:, None], axis=0)])
+
+
+#: The CMU stretches shipped with the package (``models/motions``): ``train-garment`` trains a
+#: garment's own models on them by default, so that a user with no mocap folder still trains on
+#: real motion (``scripts/store_motions.py`` writes the file from a mocap folder and a list of
+#: :class:`MocapSpec` entries).
+STORED_MOTIONS = "motions/cmu_stretches.npz"
+
+
+def store_motions(specs: list[dict], mocap_dir: str | Path, out: str | Path, *,
+                  smpl_joints: np.ndarray | None = None) -> list[str]:
+    """Retarget and ease in the stretches ``specs`` names (entries as a data set config's
+    ``bvh`` motions) and write them to one ``.npz`` that :func:`stored_motion` reads.
+
+    The poses and root paths are stored as float32 (the float64 retarget rounded, 1e-7 rad);
+    each stretch keeps its name (:attr:`MocapSpec.label`), warm-up and provenance.
+
+    Returns:
+        the names written, in order.
+    Raises:
+        ArgumentError: a bad entry, or two entries of one name.
+        MotionFileError: as :func:`mocap_motion`.
+    """
+    names, motions = [], []
+    for i, fields in enumerate(specs):
+        try:
+            spec = MocapSpec(**fields)
+        except TypeError as exc:
+            raise ArgumentError(f"motion {i}: {exc}") from None
+        if spec.label in names:
+            raise ArgumentError(f"motion {i}: the name {spec.label!r} is taken by an earlier entry")
+        names.append(spec.label)
+        m = mocap_motion(spec, mocap_dir, smpl_joints=smpl_joints)
+        motions.append((m, {**m.source, "spec": dict(fields), "fps": spec.fps}))
+    lengths = [len(m.poses) for m, _ in motions]
+    np.savez_compressed(
+        out, names=np.array(names), offsets=np.concatenate([[0], np.cumsum(lengths)]).astype(np.int64),
+        poses=np.concatenate([m.poses for m, _ in motions]).astype(np.float32),
+        transl=np.concatenate([m.transl for m, _ in motions]).astype(np.float32),
+        warmup=np.array([m.warmup_frames for m, _ in motions], dtype=np.int64),
+        sources=np.array(json.dumps([s for _, s in motions])))
+    return names
+
+
+def stored_motion_names(path: str | Path | None = None) -> tuple[str, ...]:
+    """The names of the stretches in ``path`` (default: :data:`STORED_MOTIONS` of the package)."""
+    with np.load(_stored_path(path)) as f:
+        return tuple(str(n) for n in f["names"])
+
+
+def stored_motion(name: str, path: str | Path | None = None) -> tuple[MocapMotion, float]:
+    """One stretch of the stored file, as :func:`mocap_motion` made it from its clip.
+
+    Returns:
+        ``(motion, fps)``; the motion's poses and root path in float64.
+    Raises:
+        ArgumentError: no stretch of that name (the message lists the file and a few names).
+    """
+    file = _stored_path(path)
+    with np.load(file) as f:
+        names = [str(n) for n in f["names"]]
+        if name not in names:
+            raise ArgumentError(f"{file}: no stored motion {name!r} (it holds {len(names)}: "
+                                f"{', '.join(names[:4])}, ...)")
+        k = names.index(name)
+        lo, hi = f["offsets"][k], f["offsets"][k + 1]
+        source = json.loads(str(f["sources"]))[k]
+        motion = MocapMotion(poses=f["poses"][lo:hi].astype(np.float64), transl=f["transl"][lo:hi].astype(np.float64),
+                             warmup_frames=int(f["warmup"][k]), source={**source, "stored": name})
+    return motion, float(source["fps"])
+
+
+def _stored_path(path: str | Path | None) -> Path:
+    return Path(path) if path is not None else models_dir() / STORED_MOTIONS

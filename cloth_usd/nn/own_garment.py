@@ -8,8 +8,10 @@ and carried onto four more shapes across the shape space (slim, broad, short and
 tall and thin), the five training pairs per garment the fit attribute needs. A dress is
 bound as a bake binds it (:func:`~cloth_usd.core.skinning.bind_worn`: the skirt's loose
 vertices take blended weights), so the models learn on the skinned garment a bake starts from.
-The motions are the seven procedural ones, plus any the user lists (real clips among them, with a mocap
-folder). Then the coarse model and the detail model are trained on the garment's own
+The motions are the seven procedural ones and real ones: by default the 24 CMU stretches shipped with
+the package (:data:`~cloth_usd.datagen.mocap.STORED_MOTIONS`, retargeted already), else those the
+user lists (clips of a mocap folder among them; an empty list trains on the procedural ones alone).
+Then the coarse model and the detail model are trained on the garment's own
 physics (:func:`~cloth_usd.nn.physics_train.train_physics`: no simulation), and both are
 exported and verified as a bundle (:func:`~cloth_usd.nn.export.export_bundle`). The work
 folder keeps the config and both runs (curves, histories), so each step can be rerun by
@@ -37,7 +39,8 @@ from ..errors import ArgumentError
 if TYPE_CHECKING:
     from ..datagen.factory import OwnGarment
 
-__all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "TEST_SET_CONFIG", "HYBRID_CONFIG",
+__all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "stored_motions", "TEST_SET_CONFIG",
+           "HYBRID_CONFIG",
            "TRAIN_BODIES", "train_own_garment"]
 
 log = logging.getLogger(__name__)
@@ -194,13 +197,21 @@ def _best(result) -> tuple[float, float]:
     return float(result.best.val_loss), float(result.best.val_mm)
 
 
+def stored_motions() -> tuple[dict, ...]:
+    """The entries of the CMU stretches shipped with the package (``{"stored": name}``): the real
+    motions ``train-garment`` trains on unless the user lists others (``--motions``)."""
+    from ..datagen.mocap import stored_motion_names
+
+    return tuple({"stored": name} for name in stored_motion_names())
+
+
 def _garment_file(i: int) -> str:
     return GARMENT_FILE if i == 0 else GARMENT_FILE.replace(".npz", f"{i}.npz")
 
 
 def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
                       name: str, work_dir: str | Path | None = None,
-                      motions: tuple[dict, ...] = (), test_motions: tuple[dict, ...] = (),
+                      motions: tuple[dict, ...] | None = None, test_motions: tuple[dict, ...] = (),
                       mocap_dir: str | Path | None = None, sim_data: str | Path | None = None,
                       plan: OwnGarmentPlan = OwnGarmentPlan(), force: bool = False, device: str | None = "auto",
                       body: BodyModel | None = None,
@@ -214,7 +225,8 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
         out_dir: the bundle folder to write.
         name: the bundle's name (recorded in every cache it bakes).
         work_dir: where the config and the runs go (default: ``<out_dir>.work``).
-        motions: extra training motions, entries as a data set config's ``train_motions``.
+        motions: the training motions besides the procedural ones, entries as a data set config's
+            ``train_motions``; None: the stored CMU stretches (:func:`stored_motions`).
         test_motions: the motions of the test set config (:data:`TEST_SET_CONFIG`), entries
             as ``motions``; none: :data:`TEST_MOTIONS`. Not trained on, nor checked here (the
             test set's ``cloth-usd datagen`` reads them).
@@ -266,7 +278,8 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
     for f, g in zip(files, garments):
         save_own_garment(work / f, g.vertices, g.faces, g.betas, category=category.value)
     data = {"garment": files[0] if len(files) == 1 else files, "bodies": ["own", *TRAIN_BODIES, VAL_BODY], "test_bodies": [VAL_BODY],
-            "test_body_shirts": 1, "sim": {"fps": 30}, "train_motions": [*PROCEDURAL_MOTIONS, *motions],
+            "test_body_shirts": 1, "sim": {"fps": 30},
+            "train_motions": [*PROCEDURAL_MOTIONS, *(stored_motions() if motions is None else motions)],
             "test_motions": list(TEST_MOTIONS)}
     _write_json(work / DATA_CONFIG, data)
     _write_json(work / TEST_SET_CONFIG, {**data, "sim": {**data["sim"], **TEST_SET_SIM},

@@ -403,7 +403,7 @@ def _sim_frames(sim_data: Path, entry: dict, job, config_path: Path,
 def _motion_rates(factory, config_path: Path) -> dict[str, float]:
     """The frame rate [1/s] of each procedural motion of a data set config, by the name the
     factory gives its jobs (``<kind>-s<seed>``). A job's own ``meta["fps"]`` wins where the
-    factory records one; a motion named here by neither (a mocap clip) runs at the
+    factory records one; a motion named here by neither (a mocap clip, stored or not) runs at the
     simulator's rate, which the factory makes every motion match."""
     from ..datagen.motion import MotionKind, MotionSpec
     from ..datagen.simulate import SimConfig
@@ -411,7 +411,7 @@ def _motion_rates(factory, config_path: Path) -> dict[str, float]:
     sim_fps = float(SimConfig(**factory.sim).fps)
     rates: dict[str, float] = {}
     for fields in (*factory.train_motions, *factory.test_motions):
-        if not isinstance(fields, dict) or "bvh" in fields:
+        if not isinstance(fields, dict) or "bvh" in fields or "stored" in fields:
             continue
         spec = MotionSpec(**fields)
         name, fps = f"{MotionKind(spec.kind).value}-s{spec.seed}", float(spec.fps)

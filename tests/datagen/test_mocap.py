@@ -185,3 +185,64 @@ def test_floor_jobs_hold_a_pose_and_are_measured(tmp_path, monkeypatch):
     assert len(report["frames"]) == 2 and report["mean_mm"] < 1e-3
     assert all(r["settle_mm"] < 1e-3 for r in report["frames"])
     assert all(c.split.value == "test_motion" for c in load_dataset(out).clips)  # held poses are not loaded
+
+
+def test_stored_stretches_are_the_clips_as_a_config_reads_them(tmp_path):
+    """store_motions keeps each stretch as mocap_motion makes it (float32), with its name, warm-up and source."""
+    from cloth_usd.datagen.mocap import store_motions, stored_motion, stored_motion_names
+
+    specs = [{"bvh": WALK, "seconds": 0.6, "ease_seconds": 0.3, "ramp_seconds": 0.1},
+             {"bvh": "cmu_daz_12_01_walk.bvh", "start_seconds": 0.1, "seconds": 0.5, "name": "daz"}]
+    out = tmp_path / "stored.npz"
+    names = store_motions(specs, MOCAP, out)
+    assert names == [MocapSpec(**specs[0]).label, "daz"] and stored_motion_names(out) == tuple(names)
+    for name, fields in zip(names, specs):
+        made = mocap_motion(MocapSpec(**fields), MOCAP)
+        stored, fps = stored_motion(name, out)
+        assert fps == 30.0 and stored.warmup_frames == made.warmup_frames
+        np.testing.assert_allclose(stored.poses, made.poses, atol=1e-6)
+        np.testing.assert_allclose(stored.transl, made.transl, atol=1e-6)
+        assert stored.poses.dtype == np.float64
+        assert stored.source["stored"] == name and stored.source["sha256"] == made.source["sha256"]
+    with pytest.raises(ArgumentError, match=rf"{out.name}: no stored motion 'walk' \(it holds 2"):
+        stored_motion("walk", out)
+    with pytest.raises(ArgumentError, match="motion 1: the name 'daz' is taken"):
+        store_motions([specs[1], specs[1]], MOCAP, tmp_path / "twice.npz")
+
+
+def test_the_shipped_stretches_are_real_motion_held_apart_from_the_test_clips():
+    """The package's stretches: the list the sample garments' own bundles train on, eased in from
+    rest at 30 fps, and none of the clips the bundles' reports hold out."""
+    from cloth_usd.datagen.mocap import stored_motion, stored_motion_names
+
+    root = Path(__file__).resolve().parents[2]
+    listed = json.loads((root / "configs" / "own_garment_motions_v6.json").read_text())
+    names = stored_motion_names()
+    assert names == tuple(MocapSpec(**m).label for m in listed)
+    tests = json.loads((root / "configs" / "own_garment_test_motions.json").read_text())
+    held_out = {Path(m["bvh"]).stem for m in tests}
+    held_out |= {"05_02", "01_01", "02_03", "09_12"}  # and the dances: salsa 10 and 25, martial arts 04
+    for name in names:
+        m, fps = stored_motion(name)
+        clip = m.source["bvh"]
+        assert Path(clip).stem not in held_out and not any(clip.endswith(d) for d in
+                                                          ("salsa/10.bvh", "salsa/25.bvh", "martial/04.bvh"))
+        assert fps == 30.0 and m.poses.shape == (len(m.transl), 72) and 0 < m.warmup_frames < len(m.poses) - 20
+        np.testing.assert_array_equal(m.poses[0], 0.0)
+        assert np.abs(m.poses).max() > 0.5  # it moves
+
+
+def test_factory_plans_stored_motions_without_a_mocap_folder(tmp_path, monkeypatch):
+    from cloth_usd.datagen.mocap import stored_motion, stored_motion_names
+
+    monkeypatch.delenv(MOCAP_ENV, raising=False)
+    name = stored_motion_names()[0]
+    path = _config(tmp_path, test_motions=[{"stored": name}], max_frames=60)
+    real = [j for j in plan_jobs(load_config(path)) if j.meta["motion"] == name]
+    m, _ = stored_motion(name)
+    assert real and {j.meta["split"] for j in real} >= {"test_motion", "test_body"}
+    assert all(j.meta["warmup_frames"] == m.warmup_frames and j.poses.shape == (60, 72) for j in real)
+    np.testing.assert_array_equal(real[0].poses, m.poses[:60])
+    assert real[0].meta["motion_source"]["stored"] == name
+    with pytest.raises(ArgumentError, match=r"test_motions\[0\]: a stored motion takes no other field.*seconds"):
+        plan_jobs(load_config(_config(tmp_path, test_motions=[{"stored": name, "seconds": 2}])))

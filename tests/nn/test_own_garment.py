@@ -12,6 +12,7 @@ from cloth_usd.core.body import load_body_model, shape_body
 from cloth_usd.datagen import TShirtParams, make_tshirt
 from cloth_usd.datagen.factory import OWN_BODY, load_config, plan_jobs, save_own_garment
 from cloth_usd.errors import ArgumentError
+from cloth_usd.nn.own_garment import PROCEDURAL_MOTIONS, stored_motions
 
 SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "walk_tshirt" / "scene.usda"
 
@@ -109,9 +110,10 @@ def test_train_garment_makes_a_bundle_that_bakes_the_sample(tmp_path, capsys):
     out = tmp_path / "mine"
     held_out = [{"kind": "arm_raise", "seconds": 1.0, "fps": 30, "seed": 40}]
     (tmp_path / "test_motions.json").write_text(json.dumps(held_out))
+    (tmp_path / "none.json").write_text("[]")
     assert main(["train-garment", str(SAMPLE), "-o", str(out), "--form", "paper", "--coarse-epochs", "1",
                  "--detail-epochs", "1", "--batches", "1", "--threads", "1", "--device", "cpu",
-                 "--test-motions", str(tmp_path / "test_motions.json")]) == 0
+                 "--test-motions", str(tmp_path / "test_motions.json"), "--motions", str(tmp_path / "none.json")]) == 0
     said = capsys.readouterr().out
     assert "wrote bundle" in said and "3516 vertices" in said and "testset.json" in said
     # the work folder's test set config plans the held-out motion, and datagen simulates that alone:
@@ -125,6 +127,7 @@ def test_train_garment_makes_a_bundle_that_bakes_the_sample(tmp_path, capsys):
     assert training.simulate_splits is None and testset.garment == training.garment
     assert testset.sim == {**training.sim, "collider_faces": None, "self_contact": False}  # as the shipped test sets
     assert [m["kind"] for m in training.test_motions] == ["dance", "walk"]
+    assert list(training.train_motions) == list(PROCEDURAL_MOTIONS)  # --motions []: the procedural ones alone
     bundle = load_bundle(out)
     assert bundle.manifest["category"] == "tshirt" and bundle.manifest["name"] == "mine"
     assert json.loads((tmp_path / "mine.work" / "timing.json").read_text())["total"] > 0
@@ -153,6 +156,8 @@ def test_train_garment_of_the_garment_form_bakes_the_sample(tmp_path, capsys):
     assert "its models read" in said and "left_hand, right_hand, which cannot move it" in said
     hybrid = load_config(tmp_path / "own.work" / "hybrid.json")
     training = load_config(tmp_path / "own.work" / "data.json")
+    # no --motions: the procedural motions and the CMU stretches shipped with the package
+    assert list(training.train_motions) == [*PROCEDURAL_MOTIONS, *stored_motions()] and len(stored_motions()) == 24
     assert hybrid.simulate_splits == ("train",) and hybrid.simulate_sequences == {"train": 12}
     assert hybrid.sim == {**training.sim, "collider_faces": None, "self_contact": False, "keep_partial": 15}
     assert [j.name for j in plan_jobs(hybrid)] == [j.name for j in plan_jobs(training)]
