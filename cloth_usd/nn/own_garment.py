@@ -11,8 +11,8 @@ vertices take blended weights), so the models learn on the skinned garment a bak
 The motions are the seven procedural ones and real ones: by default the 24 CMU stretches shipped with
 the package (:data:`~cloth_usd.datagen.mocap.STORED_MOTIONS`, retargeted already), else those the
 user lists (clips of a mocap folder among them; an empty list trains on the procedural ones alone).
-Then the coarse model and the detail model are trained on the garment's own
-physics (:func:`~cloth_usd.nn.physics_train.train_physics`: no simulation), and both are
+Then the coarse model and the detail model are trained on the garment's own physics
+(:func:`~cloth_usd.nn.physics_train.train_physics`: no simulation), and both are
 exported and verified as a bundle (:func:`~cloth_usd.nn.export.export_bundle`). The work
 folder keeps the config and both runs (curves, histories), so each step can be rerun by
 hand with ``cloth-usd train`` and ``cloth-usd export``, and a second config, ``testset.json``:
@@ -40,8 +40,7 @@ if TYPE_CHECKING:
     from ..datagen.factory import OwnGarment
 
 __all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "stored_motions", "TEST_SET_CONFIG",
-           "HYBRID_CONFIG",
-           "TRAIN_BODIES", "train_own_garment"]
+           "HYBRID_CONFIG", "TRAIN_BODIES", "train_own_garment"]
 
 log = logging.getLogger(__name__)
 
