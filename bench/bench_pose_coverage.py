@@ -20,14 +20,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cloth_usd.core.limits import poses_to_euler
+from cloth_usd.core.limits import POSE_MARGIN_DEG, pose_excess, poses_to_euler
 from cloth_usd.core.smpl import JOINT_NAMES
 from cloth_usd.datagen.bvh import read_bvh, retarget_bvh, rig_mapping, synthetic_first_frame, trim_bvh
 from cloth_usd.errors import ClothUsdError
 from cloth_usd.runtime.bundle import load_bundle
-
-MARGIN_DEG = 10.0  # the bake's (pose_outliers)
-
 
 def clip_poses(path: Path) -> np.ndarray:
     """(T, 72) the clip retargeted at 30 fps onto the mean body, its synthetic T-pose frame left out."""
@@ -53,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
         if b.pose_limits is None:
             sys.stderr.write(f"{name}: its manifest records no trained pose range (the bake checks fixed limits)\n")
             return 2
-        limits.append(np.asarray(b.pose_limits)[1:])  # the root turns freely
+        limits.append(b.pose_limits)
     files = sorted(p for p in args.mocap.rglob("*.bvh") if not any(p.as_posix().endswith(e) for e in args.exclude))
     shares = [[] for _ in bundles]  # per clip, the share of its frames warned on
     warned = [0 for _ in bundles]
@@ -61,13 +58,13 @@ def main(argv: list[str] | None = None) -> int:
     frames, skipped = 0, []
     for path in files:
         try:
-            euler = poses_to_euler(clip_poses(path))[:, 1:]
+            euler = poses_to_euler(clip_poses(path))
         except (ClothUsdError, ValueError) as exc:
             skipped.append(f"{path.relative_to(args.mocap)} ({exc})")
             continue
         frames += len(euler)
         for k, lim in enumerate(limits):
-            excess = np.maximum(euler - lim[..., 1], lim[..., 0] - euler) > np.deg2rad(MARGIN_DEG)
+            excess = pose_excess(euler, lim) > np.deg2rad(POSE_MARGIN_DEG)  # the bake's test (pose_outliers)
             outside = excess.any(axis=(1, 2))
             shares[k].append(outside.mean())
             warned[k] += int(outside.sum())

@@ -15,7 +15,6 @@ import json
 import sys
 from pathlib import Path
 
-from cloth_usd.core.body import load_body_model, shape_body
 from cloth_usd.datagen.mocap import store_motions
 
 
@@ -26,8 +25,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("-o", "--out", required=True, help="the .npz to write")
     args = parser.parse_args(argv)
     specs = json.loads(Path(args.motions).read_text())
-    joints = shape_body(load_body_model(), [0.0])[1]
-    names = store_motions(specs, args.mocap, args.out, smpl_joints=joints)
+    names = store_motions(specs, args.mocap, args.out)  # onto the embedded model's mean shape
     size = Path(args.out).stat().st_size
     sys.stdout.write(f"wrote {args.out}: {len(names)} stretches, {size / 1e6:.2f} MB\n")
     return 0

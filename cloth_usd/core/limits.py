@@ -19,9 +19,9 @@ from scipy.spatial.transform import Rotation
 
 from .smpl import JOINT_NAMES, NUM_JOINTS
 
-__all__ = ["BETA_LIMIT", "BETA_MARGIN", "BETA_MAX", "EULER_ORDERS", "JOINT_LIMITS", "PoseOutlier", "betas_outside",
-           "betas_outside_range", "betas_range_from_record", "betas_range_record", "pose_outliers", "pose_range",
-           "pose_range_from_record", "pose_range_record", "poses_to_euler"]
+__all__ = ["BETA_LIMIT", "BETA_MARGIN", "BETA_MAX", "EULER_ORDERS", "JOINT_LIMITS", "POSE_MARGIN_DEG", "PoseOutlier",
+           "betas_outside", "betas_outside_range", "betas_range_from_record", "betas_range_record", "pose_excess",
+           "pose_outliers", "pose_range", "pose_range_from_record", "pose_range_record", "poses_to_euler"]
 
 #: Largest ``|beta|`` of the bodies the models were trained on (SMPL's shape space is
 #: a PCA in standard deviations; beyond 3 the bodies are implausible).
@@ -32,6 +32,8 @@ BETA_MARGIN = 0.5
 #: Largest ``|beta|`` a stage may author at all: past it a body is not a body (at 1e30 its
 #: points lie 5e24 m away), so the stage is refused rather than warned about.
 BETA_MAX = 10.0
+#: How far past its trained range [deg] a joint angle may lie before the bake warns (:func:`pose_outliers`).
+POSE_MARGIN_DEG = 10.0
 
 #: Intrinsic Euler order of each joint's angles (scipy's upper-case convention). The middle
 #: angle of each order stays inside (-90, 90) deg in :data:`JOINT_LIMITS`, so angles read
@@ -130,7 +132,21 @@ class PoseOutlier:
     """High end [deg]."""
 
 
-def pose_outliers(poses: np.ndarray, margin_deg: float = 10.0, limits: np.ndarray | None = None
+def pose_excess(euler: np.ndarray, limits: np.ndarray | None = None) -> np.ndarray:
+    """How far each joint angle lies outside its limits (the root left out: it turns freely).
+
+    Args:
+        euler: (T, 24, 3) angles [rad] (:func:`poses_to_euler`).
+        limits: (J, 3, 2) [rad] the range to check against; :data:`JOINT_LIMITS` when None.
+    Returns:
+        (T, 23, 3) [rad], > 0 outside, <= 0 inside.
+    """
+    lim = (JOINT_LIMITS if limits is None else np.asarray(limits, dtype=np.float64))[1:]
+    euler = euler[:, 1:]
+    return np.maximum(euler - lim[..., 1], lim[..., 0] - euler)
+
+
+def pose_outliers(poses: np.ndarray, margin_deg: float = POSE_MARGIN_DEG, limits: np.ndarray | None = None
                   ) -> PoseOutlier | None:
     """The frames where some joint (not the root) is more than ``margin_deg`` outside its limits.
 
@@ -141,9 +157,9 @@ def pose_outliers(poses: np.ndarray, margin_deg: float = 10.0, limits: np.ndarra
     Returns:
         None when every frame is inside.
     """
-    euler = poses_to_euler(poses)[:, 1:]  # (T, 23, 3); the root turns freely
+    euler = poses_to_euler(poses)
+    excess = pose_excess(euler, limits)  # (T, 23, 3) [rad], > 0 outside
     lim = (JOINT_LIMITS if limits is None else np.asarray(limits, dtype=np.float64))[1:]
-    excess = np.maximum(euler - lim[..., 1], lim[..., 0] - euler)  # (T, 23, 3) [rad], > 0 outside
     outside = excess > np.deg2rad(margin_deg)
     frames = np.flatnonzero(outside.any(axis=(1, 2)))
     if frames.size == 0:
@@ -152,7 +168,7 @@ def pose_outliers(poses: np.ndarray, margin_deg: float = 10.0, limits: np.ndarra
     joint, axis = np.unravel_index(int(np.argmax(excess[first])), excess[first].shape)
     low, high = np.rad2deg(lim[joint, axis])
     return PoseOutlier(frames=frames.astype(np.int64), joint=JOINT_NAMES[joint + 1], axis="xyz"[axis],
-                       angle_deg=float(np.rad2deg(euler[first, joint, axis])), low_deg=float(low),
+                       angle_deg=float(np.rad2deg(euler[first, joint + 1, axis])), low_deg=float(low),
                        high_deg=float(high))
 
 
