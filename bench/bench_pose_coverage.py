@@ -52,6 +52,9 @@ def main(argv: list[str] | None = None) -> int:
             return 2
         limits.append(b.pose_limits)
     files = sorted(p for p in args.mocap.rglob("*.bvh") if not any(p.as_posix().endswith(e) for e in args.exclude))
+    if not files:
+        sys.stderr.write(f"--mocap {args.mocap}: no .bvh file under it (links to folders are not followed)\n")
+        return 2
     shares = [[] for _ in bundles]  # per clip, the share of its frames warned on
     warned = [0 for _ in bundles]
     counts = [collections.Counter() for _ in bundles]
@@ -70,6 +73,9 @@ def main(argv: list[str] | None = None) -> int:
             warned[k] += int(outside.sum())
             for j, a in zip(*np.nonzero(excess.any(axis=0))):
                 counts[k][f"{JOINT_NAMES[j + 1]} {'xyz'[a]}"] += int(excess[:, j, a].sum())
+    if not frames:
+        sys.stderr.write(f"--mocap {args.mocap}: none of its {len(files)} .bvh files could be read: {skipped[0]}\n")
+        return 2
     print(f"{len(shares[0])} clips, {frames} frames at 30 fps under {args.mocap}"
           + (f"; {len(skipped)} unread: {'; '.join(skipped)}" if skipped else ""))
     print("| bundle | frames a bake warns on | clips warned on at more than half their frames | most often outside |")

@@ -43,3 +43,13 @@ def test_it_counts_the_frames_a_bake_would_warn_on(tmp_path, capsys):
     assert all(np.abs(p[:, 3:]).max(axis=1).min() > 0.05 for p in poses)
     assert bench.main(["--mocap", str(MOCAP), "--bundle", str(narrow), "--exclude", clips[0].name]) == 0
     assert f"1 clips, {len(poses[1])} frames" in capsys.readouterr().out
+
+
+def test_a_folder_without_clips_is_refused(tmp_path, capsys):
+    bench = load_script("bench_pose_coverage", ROOT / "bench" / "bench_pose_coverage.py")
+    bundle = str(ROOT / "models" / "bundles" / "sample-tshirt-own")
+    assert bench.main(["--mocap", str(tmp_path), "--bundle", bundle]) == 2
+    assert f"--mocap {tmp_path}: no .bvh file under it" in capsys.readouterr().err
+    (tmp_path / "broken.bvh").write_text("HIERARCHY\nROOT")
+    assert bench.main(["--mocap", str(tmp_path), "--bundle", bundle]) == 2
+    assert "none of its 1 .bvh files could be read: broken.bvh" in capsys.readouterr().err

@@ -546,8 +546,10 @@ def retarget_bvh(
     world rotation at frame t relative to the reference posture, with C the up-axis
     conversion, after ``A``, the rest alignment. ``A`` turns SMPL's T-pose bone (from
     the joint to its mapped SMPL child) onto the BVH bone in the reference posture;
-    a joint with several children (pelvis, chest) takes the rotation that best turns
-    all of them (least squares), a joint with none its parent's. A joint with one child
+    a joint with several children (pelvis, chest) takes the smallest rotation that turns
+    its left-right axis (hip to hip, collar to collar) onto the BVH's, keeping the
+    reference posture's pitch (least squares over all its bones where no left-right pair
+    is mapped), a joint with none its parent's. A joint with one child
     then gets the smallest extra turn that points its bone exactly along the BVH bone
     at frame t (BVH joints between the two mapped ones, such as CMU's ``Neck1``, bend
     it too). SMPL local rotations follow through SMPL's parents; unmapped SMPL joints
@@ -692,6 +694,14 @@ def _aligned_rotations(found: dict[int, int], delta: np.ndarray, pos: np.ndarray
             align[s] = np.eye(3) if p < 0 else align[p]
         elif len(ends) == 1:
             align[s] = _swing(smpl_dirs[0], bvh_dirs[0])
+        elif (pair := _left_right(ends)) is not None:
+            # Only the left-right axis is lined up (facing and roll); the pitch about it stays
+            # the reference posture's. Rigs put the spine's first joint differently against the
+            # hips (Daz's abdomen stands straight above its hip joint, SMPL's spine1 leans 26
+            # degrees back from its pelvis), so turning that bone too tipped the pelvis 30 degrees.
+            left, right = pair
+            align[s] = _swing(_unit(smpl_joints[left] - smpl_joints[right]),
+                              _unit(ref_pos[found[left]] - ref_pos[found[right]]))
         else:
             align[s] = Rotation.align_vectors(bvh_dirs, smpl_dirs)[0].as_matrix()
         g = delta[:, b] @ align[s]
@@ -700,6 +710,15 @@ def _aligned_rotations(found: dict[int, int], delta: np.ndarray, pos: np.ndarray
             g = _swing(g @ smpl_dirs[0], now) @ g
         glob[:, s] = g
     return glob
+
+
+def _left_right(ends: list[int]) -> tuple[int, int] | None:
+    """The first left joint in ``ends`` whose right twin is also there, with that twin."""
+    for e in ends:
+        name = JOINT_NAMES[e]
+        if name.startswith("left_") and (twin := JOINT_NAMES.index("right_" + name[5:])) in ends:
+            return e, twin
+    return None
 
 
 def _unit(v: np.ndarray) -> np.ndarray:

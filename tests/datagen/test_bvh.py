@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -244,6 +245,22 @@ def test_an_arms_down_rest_puts_the_arms_where_the_file_has_them():
     off = np.degrees(np.arccos(np.sum(_smpl_bone_dirs(old, "left_shoulder", "left_elbow")[0] * want[0])))
     assert off > 60
 
+
+
+@pytest.mark.parametrize("clip", ["cmu_mb_02_01_walk.bvh", "cmu_daz_12_01_walk.bvh"])
+def test_both_cmu_rigs_walk_upright(clip):
+    # The Daz conversion puts its abdomen joint straight above the hip joint and the thighs
+    # above it, where SMPL's spine1 leans back from the pelvis: lining up every pelvis bone
+    # tipped the Daz walk's pelvis 31 deg forward (hip flexion 39 deg, spine1-3 bent back 53).
+    poses, _ = load_bvh(Path(__file__).parents[1] / "data" / "mocap" / clip, blend_seconds=0)
+    rot = Rotation.from_rotvec(poses[1:].reshape(-1, 3)).as_matrix().reshape(-1, 24, 3, 3)
+    tilt = np.degrees(np.arccos(np.clip(rot[:, 0, 1, 1], -1.0, 1.0)))  # pelvis's up axis from vertical
+
+    def about_x(j):
+        return Rotation.from_matrix(rot[:, j]).as_euler("xyz", degrees=True)[:, 0]
+    flexion = -(about_x(1) + about_x(2)) / 2
+    spine = about_x(3) + about_x(6) + about_x(9)
+    assert np.median(tilt) < 8 and np.median(flexion) < 12 and abs(np.median(spine)) < 12
 
 @pytest.mark.parametrize("up", ["Y", "Z"])
 def test_up_axis_detection(up):
