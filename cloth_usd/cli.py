@@ -168,8 +168,9 @@ def _parser() -> argparse.ArgumentParser:
                                                      "with cloth-usd)")
     tg.add_argument("--test-motions", metavar="JSON", help="the held-out motions of the Newton test set config the "
                                                           "work folder gets (testset.json: cloth-usd datagen of it "
-                                                          "simulates them alone), entries as --motions (default: a "
-                                                          "procedural dance and walk)")
+                                                          "simulates them alone), entries as --motions (default: "
+                                                          "three CMU stretches shipped with cloth-usd, 05_02, 01_01 "
+                                                          "and 06_10, none trained on)")
     tg.add_argument("--mocap", metavar="DIR", help="the folder the --motions BVH clips are relative to")
     tg.add_argument("--form", choices=("garment", "paper"),
                     help="garment (the default for one garment): models of this garment alone (pose and shape to a "

@@ -168,6 +168,9 @@ def _ramp_root(root: np.ndarray, frames: int) -> np.ndarray:
 #: real motion (``scripts/store_motions.py`` writes the file from a mocap folder and a list of
 #: :class:`MocapSpec` entries).
 STORED_MOTIONS = "motions/cmu_stretches.npz"
+#: The CMU stretches the test set ``train-garment`` writes holds out (under ``models/``): none of
+#: them is a stretch of :data:`STORED_MOTIONS` or of its clips.
+STORED_TEST_MOTIONS = "motions/cmu_test_stretches.npz"
 
 
 def store_motions(specs: list[dict], mocap_dir: str | Path, out: str | Path, *,
@@ -214,17 +217,27 @@ def stored_motion_names(path: str | Path | None = None) -> tuple[str, ...]:
 def stored_motion(name: str, path: str | Path | None = None) -> tuple[MocapMotion, float]:
     """One stretch of the stored file, as :func:`mocap_motion` made it from its clip.
 
+    Args:
+        name: the stretch's name.
+        path: the file; None looks in the package's :data:`STORED_MOTIONS`, then its
+            :data:`STORED_TEST_MOTIONS`.
     Returns:
         ``(motion, fps)``; the motion's poses and root path in float64.
     Raises:
-        ArgumentError: no stretch of that name (the message lists the file and a few names).
+        ArgumentError: no stretch of that name (the message lists the files and a few names).
     """
-    file = _stored_path(path)
+    files = [Path(path)] if path is not None else [models_dir() / STORED_MOTIONS, models_dir() / STORED_TEST_MOTIONS]
+    held = {}
+    for file in files:
+        names = stored_motion_names(file)
+        if name in names:
+            break
+        held[file] = names
+    else:
+        raise ArgumentError("no stored motion " + repr(name) + "; " + "; ".join(
+            f"{file} holds {len(names)}: {', '.join(names[:4])}{', ...' if len(names) > 4 else ''}"
+            for file, names in held.items()))
     with np.load(file) as f:
-        names = [str(n) for n in f["names"]]
-        if name not in names:
-            raise ArgumentError(f"{file}: no stored motion {name!r} (it holds {len(names)}: "
-                                f"{', '.join(names[:4])}, ...)")
         k = names.index(name)
         lo, hi = f["offsets"][k], f["offsets"][k + 1]
         source = json.loads(str(f["sources"]))[k]

@@ -17,7 +17,8 @@ exported and verified as a bundle (:func:`~cloth_usd.nn.export.export_bundle`). 
 folder keeps the config and both runs (curves, histories), so each step can be rerun by
 hand with ``cloth-usd train`` and ``cloth-usd export``, and a second config, ``testset.json``:
 the same garments and bodies, whose held-out motions alone ``cloth-usd datagen`` simulates, a
-Newton test set for ``cloth-usd evaluate``.
+Newton test set for ``cloth-usd evaluate`` (by default three more CMU stretches shipped with the
+package, :data:`~cloth_usd.datagen.mocap.STORED_TEST_MOTIONS`, none of them trained on).
 """
 
 from __future__ import annotations
@@ -39,8 +40,8 @@ from ..errors import ArgumentError
 if TYPE_CHECKING:
     from ..datagen.factory import OwnGarment
 
-__all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "stored_motions", "TEST_SET_CONFIG",
-           "HYBRID_CONFIG", "TRAIN_BODIES", "train_own_garment"]
+__all__ = ["OwnGarmentPlan", "OwnGarmentResult", "PROCEDURAL_MOTIONS", "stored_motions", "stored_test_motions",
+           "TEST_SET_CONFIG", "HYBRID_CONFIG", "TRAIN_BODIES", "train_own_garment"]
 
 log = logging.getLogger(__name__)
 
@@ -52,8 +53,8 @@ VAL_BODY = "medium_thin"
 PROCEDURAL_MOTIONS = tuple({"kind": k, "seconds": 1.0, "fps": 30, "seed": i, "blend_seconds": 0.25}
                            for i, k in enumerate(("walk", "run", "arm_raise", "arm_swing", "torso_twist",
                                                   "torso_bend", "dance")))
-#: The held-out motions of the training config: its validation sequence wears the last; the
-#: test set config (:data:`TEST_SET_CONFIG`) simulates them unless the user names others.
+#: The held-out motions of the training config: its validation sequence wears the last. (The
+#: test set config, :data:`TEST_SET_CONFIG`, holds out real motion: :func:`stored_test_motions`.)
 TEST_MOTIONS = ({"kind": "dance", "seconds": 2.0, "fps": 30, "seed": 100, "blend_seconds": 0.25},
                 {"kind": "walk", "seconds": 2.0, "fps": 30, "seed": 101, "blend_seconds": 0.25})
 DATA_CONFIG = "data.json"
@@ -204,6 +205,16 @@ def stored_motions() -> tuple[dict, ...]:
     return tuple({"stored": name} for name in stored_motion_names())
 
 
+def stored_test_motions() -> tuple[dict, ...]:
+    """The entries of the three CMU test stretches shipped with the package (05_02, 01_01 and
+    06_10; ``{"stored": name}``): the held-out motions of the test set config
+    (:data:`TEST_SET_CONFIG`) unless the user lists others (``--test-motions``)."""
+    from ..core.files import models_dir
+    from ..datagen.mocap import STORED_TEST_MOTIONS, stored_motion_names
+
+    return tuple({"stored": name} for name in stored_motion_names(models_dir() / STORED_TEST_MOTIONS))
+
+
 def _garment_file(i: int) -> str:
     return GARMENT_FILE if i == 0 else GARMENT_FILE.replace(".npz", f"{i}.npz")
 
@@ -227,8 +238,8 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
         motions: the training motions besides the procedural ones, entries as a data set config's
             ``train_motions``; None: the stored CMU stretches (:func:`stored_motions`).
         test_motions: the motions of the test set config (:data:`TEST_SET_CONFIG`), entries
-            as ``motions``; none: :data:`TEST_MOTIONS`. Not trained on, nor checked here (the
-            test set's ``cloth-usd datagen`` reads them).
+            as ``motions``; none: the stored CMU test stretches (:func:`stored_test_motions`).
+            Not trained on, nor checked here (the test set's ``cloth-usd datagen`` reads them).
         mocap_dir: the folder the ``bvh`` entries of ``motions`` are relative to.
         sim_data: the garment form's hybrid objective: a ``cloth-usd datagen`` folder of the work
             folder's :data:`HYBRID_CONFIG` (Newton's frames of some training sequences).
@@ -283,7 +294,7 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
     _write_json(work / DATA_CONFIG, data)
     _write_json(work / TEST_SET_CONFIG, {**data, "sim": {**data["sim"], **TEST_SET_SIM},
                                          "train_motions": list(PROCEDURAL_MOTIONS),
-                                         "test_motions": list(test_motions or TEST_MOTIONS),
+                                         "test_motions": list(test_motions or stored_test_motions()),
                                          "simulate_splits": list(TEST_SET_SPLITS)})
     if form == "garment":
         _write_json(work / HYBRID_CONFIG, {**data, "sim": {**data["sim"], **TEST_SET_SIM, **HYBRID_SIM},

@@ -204,7 +204,7 @@ def test_stored_stretches_are_the_clips_as_a_config_reads_them(tmp_path):
         np.testing.assert_allclose(stored.transl, made.transl, atol=1e-6)
         assert stored.poses.dtype == np.float64
         assert stored.source["stored"] == name and stored.source["sha256"] == made.source["sha256"]
-    with pytest.raises(ArgumentError, match=rf"{out.name}: no stored motion 'walk' \(it holds 2"):
+    with pytest.raises(ArgumentError, match=rf"no stored motion 'walk'; {out} holds 2: "):
         stored_motion("walk", out)
     with pytest.raises(ArgumentError, match="motion 1: the name 'daz' is taken"):
         store_motions([specs[1], specs[1]], MOCAP, tmp_path / "twice.npz")
@@ -230,6 +230,25 @@ def test_the_shipped_stretches_are_real_motion_held_apart_from_the_test_clips():
         assert fps == 30.0 and m.poses.shape == (len(m.transl), 72) and 0 < m.warmup_frames < len(m.poses) - 20
         np.testing.assert_array_equal(m.poses[0], 0.0)
         assert np.abs(m.poses).max() > 0.5  # it moves
+
+
+def test_the_shipped_test_stretches_are_the_test_list_and_apart_from_training():
+    """The three stretches train-garment's test set holds out: configs/own_garment_test_motions.json,
+    found by name without a file named, and no clip of theirs among the training stretches'."""
+    from cloth_usd.core.files import models_dir
+    from cloth_usd.datagen.mocap import STORED_TEST_MOTIONS, stored_motion, stored_motion_names
+
+    root = Path(__file__).resolve().parents[2]
+    listed = json.loads((root / "configs" / "own_garment_test_motions.json").read_text())
+    names = stored_motion_names(models_dir() / STORED_TEST_MOTIONS)
+    assert names == tuple(MocapSpec(**m).label for m in listed)
+    trained = {stored_motion(n)[0].source["bvh"] for n in stored_motion_names()}
+    for name in names:
+        m, fps = stored_motion(name)
+        assert m.source["bvh"] not in trained and fps == 30.0 and np.abs(m.poses).max() > 0.5
+    with pytest.raises(ArgumentError, match=r"no stored motion 'nope'; .*cmu_stretches.npz holds 24: .*; "
+                                            r".*cmu_test_stretches.npz holds 3: mocap-0502-t1"):
+        stored_motion("nope")
 
 
 def test_factory_plans_stored_motions_without_a_mocap_folder(tmp_path, monkeypatch):

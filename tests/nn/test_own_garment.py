@@ -12,7 +12,7 @@ from cloth_usd.core.body import load_body_model, shape_body
 from cloth_usd.datagen import TShirtParams, make_tshirt
 from cloth_usd.datagen.factory import OWN_BODY, load_config, plan_jobs, save_own_garment
 from cloth_usd.errors import ArgumentError
-from cloth_usd.nn.own_garment import PROCEDURAL_MOTIONS, stored_motions
+from cloth_usd.nn.own_garment import PROCEDURAL_MOTIONS, stored_motions, stored_test_motions
 
 SAMPLE = Path(__file__).resolve().parents[2] / "samples" / "walk_tshirt" / "scene.usda"
 
@@ -159,6 +159,13 @@ def test_train_garment_of_the_garment_form_bakes_the_sample(tmp_path, capsys):
     # no --motions: the procedural motions and the CMU stretches shipped with the package
     assert list(training.train_motions) == [*PROCEDURAL_MOTIONS, *stored_motions()] and len(stored_motions()) == 24
     assert hybrid.simulate_splits == ("train",) and hybrid.simulate_sequences == {"train": 12}
+    # no --test-motions: the Newton test set holds out the three CMU test stretches shipped with the package
+    testset = load_config(tmp_path / "own.work" / "testset.json")
+    assert list(testset.test_motions) == list(stored_test_motions()) and len(stored_test_motions()) == 3
+    held = {j.meta["motion"] for j in plan_jobs(testset) if j.meta["split"] in testset.simulate_splits}
+    assert held == {m["stored"] for m in stored_test_motions()}
+    command = next(line for line in said.splitlines() if "a Newton test set for it" in line)
+    assert "testset.json" in command and "--mocap" not in command  # its datagen command needs no mocap folder
     assert hybrid.sim == {**training.sim, "collider_faces": None, "self_contact": False, "keep_partial": 15}
     assert [j.name for j in plan_jobs(hybrid)] == [j.name for j in plan_jobs(training)]
     # --coarse-target: the coarse model's spring pulls toward Newton's frames smoothed; the detail's, the frames
