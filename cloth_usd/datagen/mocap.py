@@ -227,23 +227,21 @@ def stored_motion(name: str, path: str | Path | None = None) -> tuple[MocapMotio
         ArgumentError: no stretch of that name (the message lists the files and a few names).
     """
     files = [Path(path)] if path is not None else [models_dir() / STORED_MOTIONS, models_dir() / STORED_TEST_MOTIONS]
-    held = {}
+    held = []
     for file in files:
-        names = stored_motion_names(file)
-        if name in names:
-            break
-        held[file] = names
-    else:
-        raise ArgumentError("no stored motion " + repr(name) + "; " + "; ".join(
-            f"{file} holds {len(names)}: {', '.join(names[:4])}{', ...' if len(names) > 4 else ''}"
-            for file, names in held.items()))
-    with np.load(file) as f:
-        k = names.index(name)
-        lo, hi = f["offsets"][k], f["offsets"][k + 1]
-        source = json.loads(str(f["sources"]))[k]
-        motion = MocapMotion(poses=f["poses"][lo:hi].astype(np.float64), transl=f["transl"][lo:hi].astype(np.float64),
-                             warmup_frames=int(f["warmup"][k]), source={**source, "stored": name})
-    return motion, float(source["fps"])
+        with np.load(file) as f:
+            names = [str(n) for n in f["names"]]
+            if name not in names:
+                held.append(f"{file} holds {len(names)}: {', '.join(names[:4])}{', ...' if len(names) > 4 else ''}")
+                continue
+            k = names.index(name)
+            lo, hi = f["offsets"][k], f["offsets"][k + 1]
+            source = json.loads(str(f["sources"]))[k]
+            motion = MocapMotion(poses=f["poses"][lo:hi].astype(np.float64),
+                                 transl=f["transl"][lo:hi].astype(np.float64),
+                                 warmup_frames=int(f["warmup"][k]), source={**source, "stored": name})
+        return motion, float(source["fps"])
+    raise ArgumentError(f"no stored motion {name!r}; {'; '.join(held)}")
 
 
 def _stored_path(path: str | Path | None) -> Path:
