@@ -15,25 +15,29 @@ from __future__ import annotations
 
 import argparse
 import collections
+import functools
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from cloth_usd.core.body import load_body_model, shape_body
 from cloth_usd.core.limits import POSE_MARGIN_DEG, pose_excess, poses_to_euler
 from cloth_usd.core.smpl import JOINT_NAMES
-from cloth_usd.datagen.bvh import read_bvh, retarget_bvh, rig_mapping, synthetic_first_frame, trim_bvh
 from cloth_usd.errors import ClothUsdError
+from cloth_usd.motion_import import bvh_motion
 from cloth_usd.runtime.bundle import load_bundle
 
+
+@functools.cache
+def _mean_joints() -> np.ndarray:
+    return shape_body(load_body_model(), np.zeros(1))[1]
+
+
 def clip_poses(path: Path) -> np.ndarray:
-    """(T, 72) the clip retargeted at 30 fps onto the mean body, its synthetic T-pose frame left out."""
-    bvh = read_bvh(path)
-    rig, mapping = rig_mapping(bvh, None)
-    first = 1 if synthetic_first_frame(bvh, rig) else 0
-    poses, _ = retarget_bvh(trim_bvh(bvh, first, bvh.num_frames - 1), mapping=mapping, fps=30.0, up_axis=None,
-                            blend_seconds=0.0)
-    return poses
+    """(T, 72) the clip as ``import-motion`` reads it, at 30 fps onto the mean body (its synthetic
+    T-pose frame left out)."""
+    return bvh_motion(path, _mean_joints(), 30.0, None, None)[0]
 
 
 def main(argv: list[str] | None = None) -> int:

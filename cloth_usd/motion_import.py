@@ -33,7 +33,8 @@ from .errors import ArgumentError, MotionFileError
 from .usd.motion_stage import GarmentSource, read_garment_source, write_motion_stage
 from .usd.write import check_output_path
 
-__all__ = ["DEFAULT_FPS", "DEFAULT_START", "ImportResult", "import_motion", "parse_betas", "parse_source_frames"]
+__all__ = ["DEFAULT_FPS", "DEFAULT_START", "ImportResult", "bvh_motion", "import_motion", "parse_betas",
+           "parse_source_frames"]
 
 log = logging.getLogger(__name__)
 
@@ -187,7 +188,7 @@ def import_motion(
     joints = shape_body(load_body_model(body_model, gender=gender), shape)[1]
 
     if is_bvh:
-        poses, root, rig, used = _bvh_motion(source, joints, out_fps, frames, joint_map)
+        poses, root, rig, used = bvh_motion(source, joints, out_fps, frames, joint_map)
     else:
         poses, root, rate, used = _amass_motion(source, frames)
         poses, root = resample(poses, root, rate, out_fps)
@@ -204,9 +205,15 @@ def import_motion(
                         start=float(start), betas=shape, gender=gender, garments=paths)
 
 
-def _bvh_motion(source: Path, joints: np.ndarray, fps: float, frames: tuple[int, int] | None, joint_map
-                ) -> tuple[np.ndarray, np.ndarray, str, tuple[int, int]]:
-    """Poses (T, 72) [rad], root offsets (T, 3) [m], the rig's name and the frames used."""
+def bvh_motion(source: Path, joints: np.ndarray, fps: float, frames: tuple[int, int] | None, joint_map
+               ) -> tuple[np.ndarray, np.ndarray, str, tuple[int, int]]:
+    """A BVH clip as ``import-motion`` reads it: its known rig (or ``joint_map``), frames
+    ``frames`` (default: all but a CMU conversion's synthetic T-pose frame), retargeted at
+    ``fps`` onto the rest joints ``joints`` (24, 3) [m], not eased in.
+
+    Returns:
+        poses (T, 72) [rad], root offsets (T, 3) [m], the rig's name and the frames used.
+    """
     from .datagen.bvh import BVH_RIGS, read_bvh, retarget_bvh, rig_mapping, synthetic_first_frame, trim_bvh
 
     bvh = read_bvh(source)
