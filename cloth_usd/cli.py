@@ -170,7 +170,7 @@ def _parser() -> argparse.ArgumentParser:
                                                           "work folder gets (testset.json: cloth-usd datagen of it "
                                                           "simulates them alone), entries as --motions (default: "
                                                           "three CMU stretches shipped with cloth-usd, 05_02, 01_01 "
-                                                          "and 06_10, none trained on)")
+                                                          "and 06_10, none trained on; not empty)")
     tg.add_argument("--mocap", metavar="DIR", help="the folder the --motions BVH clips are relative to")
     tg.add_argument("--form", choices=("garment", "paper"),
                     help="garment (the default for one garment): models of this garment alone (pose and shape to a "
@@ -620,7 +620,10 @@ def _train_garment(args: argparse.Namespace) -> int:
         return tuple(found)
 
     motions = motion_list("--motions", args.motions)
-    test_motions = motion_list("--test-motions", args.test_motions) or ()
+    test_motions = motion_list("--test-motions", args.test_motions)
+    if test_motions == ():
+        raise ArgumentError(f"--test-motions {args.test_motions}: an empty list; the test set needs at least one "
+                            "motion (leave the flag out for the three stored CMU test stretches)")
     body = load_body_model()
     owns, prims = [], []
     for path in args.scene:
@@ -654,7 +657,7 @@ def _train_garment(args: argparse.Namespace) -> int:
                              f"{start}), {r.seconds:.0f} s\n")
         sys.stdout.flush()
 
-    mocap = f" --mocap {args.mocap or 'MOCAP'}" if any("bvh" in m for m in test_motions) else ""  # the test set's clips
+    mocap = f" --mocap {args.mocap or 'MOCAP'}" if any("bvh" in m for m in test_motions or ()) else ""  # the test set's clips
     out = Path(args.out)
     result = train_own_garment(owns, out, name=args.name or out.name, work_dir=args.work, motions=motions,
                                test_motions=test_motions, mocap_dir=args.mocap, sim_data=args.sim_data, plan=plan,

@@ -214,21 +214,17 @@ def bvh_motion(source: Path, joints: np.ndarray, fps: float, frames: tuple[int, 
     Returns:
         poses (T, 72) [rad], root offsets (T, 3) [m], the rig's name and the frames used.
     """
-    from .datagen.bvh import BVH_RIGS, read_bvh, retarget_bvh, rig_mapping, synthetic_first_frame, trim_bvh
+    from .datagen.bvh import read_rigged_bvh, retarget_bvh, trim_bvh
 
-    bvh = read_bvh(source)
     user = as_joint_map(joint_map)
     entries = None if user is None else {k: JOINT_NAMES[v] for k, v in user.entries.items()}
-    rig, mapping = rig_mapping(bvh, entries)
-    if not mapping:
-        raise MotionFileError(f"{source}: its joints ({', '.join(bvh.names[:8])}, ...) follow no known BVH rig "
-                              f"(known: {', '.join(BVH_RIGS)}); pass --joint-map FILE, a JSON object "
-                              "{\"bvh joint\": \"SMPL joint\"}")
+    bvh, rig, mapping, first = read_rigged_bvh(source, entries, hint="; pass --joint-map FILE, a JSON object "
+                                                                      "{\"bvh joint\": \"SMPL joint\"}")
     name = rig if user is None else ("joint map" if rig is None else f"{rig} + joint map")
     if bvh.num_frames == 0:
         raise MotionFileError(f"{source}: the file has no frames")
     if frames is None:
-        frames = (1 if synthetic_first_frame(bvh, rig) else 0, bvh.num_frames - 1)
+        frames = (first, bvh.num_frames - 1)
     elif frames[1] >= bvh.num_frames:
         raise ArgumentError(f"--frames {frames[0]}:{frames[1]}: {source} has frames 0:{bvh.num_frames - 1}")
     bvh = trim_bvh(bvh, *frames)

@@ -52,6 +52,7 @@ __all__ = [
     "parse_bvh",
     "synthetic_first_frame",
     "read_bvh",
+    "read_rigged_bvh",
     "retarget_bvh",
     "rig_mapping",
     "trim_bvh",
@@ -494,6 +495,25 @@ def synthetic_first_frame(bvh: Bvh, rig: str | None) -> bool:
         return False
     root = [k for k, c in enumerate(bvh.channels[0]) if c.endswith("rotation")]
     return bool(np.all(bvh.motion[0, root] == 0.0) and np.abs(bvh.motion[0, len(bvh.channels[0]):]).max() < 30.0)
+
+
+def read_rigged_bvh(path: str | Path, joint_map: Mapping[str, str] | None = None, *, hint: str = ""
+                    ) -> tuple[Bvh, str | None, dict[str, str], int]:
+    """A BVH file read with its joint table (:func:`rig_mapping`) and its first captured frame.
+
+    Returns:
+        ``(bvh, rig name or None, mapping, first)``: ``first`` is 1 past a CMU conversion's
+        synthetic T-pose frame (:func:`synthetic_first_frame`), else 0.
+    Raises:
+        MotionFileError: the file is unreadable, or its joints follow no known rig and
+            ``joint_map`` maps none (the line names the file and ends with ``hint``).
+    """
+    bvh = read_bvh(path)
+    rig, mapping = rig_mapping(bvh, joint_map)
+    if not mapping:
+        raise MotionFileError(f"{path}: its joints ({', '.join(bvh.names[:8])}, ...) follow no known BVH rig "
+                              f"(known: {', '.join(BVH_RIGS)}){hint}")
+    return bvh, rig, mapping, 1 if synthetic_first_frame(bvh, rig) else 0
 
 
 def _resolve_mapping(bvh: Bvh, mapping: Mapping[str, str] | None) -> dict[int, int]:

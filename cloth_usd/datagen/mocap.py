@@ -32,7 +32,7 @@ from scipy.spatial.transform import Rotation
 from ..core.files import models_dir
 from ..core.heading import root_yaw, yaw_matrices
 from ..errors import ArgumentError, MotionFileError
-from .bvh import BVH_RIGS, read_bvh, retarget_bvh, rig_mapping, synthetic_first_frame, trim_bvh
+from .bvh import read_rigged_bvh, retarget_bvh, trim_bvh
 from .motion import blend_from_rest
 
 __all__ = ["MocapSpec", "MocapMotion", "mocap_motion", "STORED_MOTIONS", "store_motions", "stored_motion",
@@ -117,12 +117,7 @@ def mocap_motion(spec: MocapSpec, mocap_dir: str | Path, *, smpl_joints: np.ndar
     if not path.is_file():
         raise MotionFileError(f"{path}: no such BVH file (the motion {spec.bvh!r} is relative to the mocap "
                               f"folder {mocap_dir})")
-    bvh = read_bvh(path)
-    rig, mapping = rig_mapping(bvh, None)
-    if not mapping:
-        raise MotionFileError(f"{path}: its joints ({', '.join(bvh.names[:6])}, ...) follow no known BVH rig "
-                              f"(known: {', '.join(BVH_RIGS)})")
-    first = 1 if synthetic_first_frame(bvh, rig) else 0
+    bvh, rig, mapping, first = read_rigged_bvh(path)
     start = first + int(round(spec.start_seconds * bvh.fps))
     stop = start + int(np.ceil(spec.seconds * bvh.fps))
     if stop >= bvh.num_frames:

@@ -221,7 +221,7 @@ def _garment_file(i: int) -> str:
 
 def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
                       name: str, work_dir: str | Path | None = None,
-                      motions: tuple[dict, ...] | None = None, test_motions: tuple[dict, ...] = (),
+                      motions: tuple[dict, ...] | None = None, test_motions: tuple[dict, ...] | None = None,
                       mocap_dir: str | Path | None = None, sim_data: str | Path | None = None,
                       plan: OwnGarmentPlan = OwnGarmentPlan(), force: bool = False, device: str | None = "auto",
                       body: BodyModel | None = None,
@@ -238,7 +238,7 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
         motions: the training motions besides the procedural ones, entries as a data set config's
             ``train_motions``; None: the stored CMU stretches (:func:`stored_motions`).
         test_motions: the motions of the test set config (:data:`TEST_SET_CONFIG`), entries
-            as ``motions``; none: the stored CMU test stretches (:func:`stored_test_motions`).
+            as ``motions``; None: the stored CMU test stretches (:func:`stored_test_motions`).
             Not trained on, nor checked here (the test set's ``cloth-usd datagen`` reads them).
         mocap_dir: the folder the ``bvh`` entries of ``motions`` are relative to.
         sim_data: the garment form's hybrid objective: a ``cloth-usd datagen`` folder of the work
@@ -292,9 +292,10 @@ def train_own_garment(garments: Sequence[OwnGarment], out_dir: str | Path, *,
             "train_motions": [*PROCEDURAL_MOTIONS, *(stored_motions() if motions is None else motions)],
             "test_motions": list(TEST_MOTIONS)}
     _write_json(work / DATA_CONFIG, data)
+    held_out = stored_test_motions() if test_motions is None else test_motions
     _write_json(work / TEST_SET_CONFIG, {**data, "sim": {**data["sim"], **TEST_SET_SIM},
                                          "train_motions": list(PROCEDURAL_MOTIONS),
-                                         "test_motions": list(test_motions or stored_test_motions()),
+                                         "test_motions": list(held_out),
                                          "simulate_splits": list(TEST_SET_SPLITS)})
     if form == "garment":
         _write_json(work / HYBRID_CONFIG, {**data, "sim": {**data["sim"], **TEST_SET_SIM, **HYBRID_SIM},

@@ -83,6 +83,12 @@ def test_train_garment_refuses_an_existing_bundle_and_a_stage_without_that_garme
     err = capsys.readouterr().err
     assert "--test-motions" in err and "m.json" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "c").exists()
+    (tmp_path / "m.json").write_text("[]")  # an empty test set would fall back to nothing the user asked for
+    assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"),
+                 "--test-motions", str(tmp_path / "m.json")]) == 2
+    err = capsys.readouterr().err
+    assert "--test-motions" in err and "empty" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "c").exists()
     assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"), "--form", "paper",
                  "--sim-data", str(tmp_path)]) == 2
     assert "--sim-data" in capsys.readouterr().err and not (tmp_path / "c").exists()
