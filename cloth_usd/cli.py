@@ -657,7 +657,8 @@ def _train_garment(args: argparse.Namespace) -> int:
                              f"{start}), {r.seconds:.0f} s\n")
         sys.stdout.flush()
 
-    mocap = f" --mocap {args.mocap or 'MOCAP'}" if any("bvh" in m for m in test_motions or ()) else ""  # the test set's clips
+    clips = any("bvh" in m for m in test_motions or ())  # the test set reads BVH clips
+    mocap = f" --mocap {args.mocap or 'MOCAP'}" if clips else ""
     out = Path(args.out)
     result = train_own_garment(owns, out, name=args.name or out.name, work_dir=args.work, motions=motions,
                                test_motions=test_motions, mocap_dir=args.mocap, sim_data=args.sim_data, plan=plan,
