@@ -300,8 +300,6 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
     material = dataclasses.replace(base, bend_stiffness=base.bend_stiffness * bending_scale)
     if contact_margin is not None:
         material = dataclasses.replace(material, contact_margin=float(contact_margin))
-    rates = _motion_rates(factory, config_path)
-    sim_fps = float(SimConfig(**factory.sim).fps)
     keep = None if splits is None else {Split(s) for s in splits}
     simulated = _sim_entries(Path(sim_data), config_path, jobs, base) if sim_data is not None else {}
     pairs: dict[str, tuple[GarmentPair, GarmentRest]] = {}
@@ -330,7 +328,7 @@ def physics_set(config_path: str | Path, body: BodyModel | None = None, *, headi
                                  rest_points=np.asarray(job.garment_vertices, dtype=np.float64),
                                  poses=np.asarray(poses, dtype=np.float64),
                                  transl=np.asarray(transl, dtype=np.float64), meta=dict(job.meta),
-                                 fps=float(job.meta.get("fps") or rates.get(job.meta["motion"], sim_fps)),
+                                 fps=float(job.meta["fps"]),
                                  target=target))
     return PhysicsSet(config_sha256=file_sha256(config_path), fit=fit, material=material, clips=tuple(clips))
 
@@ -398,30 +396,6 @@ def _sim_frames(sim_data: Path, entry: dict, job, config_path: Path,
     from .data import taubin_smooth
 
     return taubin_smooth(shard.positions.astype(np.float64), shard.garment_faces).astype(np.float32)
-
-
-def _motion_rates(factory, config_path: Path) -> dict[str, float]:
-    """The frame rate [1/s] of each procedural motion of a data set config, by the name the
-    factory gives its jobs (``<kind>-s<seed>``). A job's own ``meta["fps"]`` wins where the
-    factory records one; a motion named here by neither (a mocap clip, stored or not) runs at the
-    simulator's rate, which the factory makes every motion match."""
-    from ..datagen.motion import MotionKind, MotionSpec
-    from ..datagen.simulate import SimConfig
-
-    sim_fps = float(SimConfig(**factory.sim).fps)
-    rates: dict[str, float] = {}
-    for fields in (*factory.train_motions, *factory.test_motions):
-        if not isinstance(fields, dict) or "bvh" in fields or "stored" in fields:
-            continue
-        spec = MotionSpec(**fields)
-        name, fps = f"{MotionKind(spec.kind).value}-s{spec.seed}", float(spec.fps)
-        if rates.setdefault(name, fps) != fps:
-            raise ArgumentError(f"{config_path}: motion {name} is listed at {rates[name]:g} and {fps:g} fps; "
-                                "the physics objective needs one rate per motion")
-        if fps != sim_fps:
-            log.warning("%s: motion %s is made at %g fps, the simulator samples at %g; the physics objective "
-                        "uses the motion's", config_path, name, fps, sim_fps)
-    return rates
 
 
 @dataclass(frozen=True)
