@@ -141,9 +141,14 @@ def pose_excess(euler: np.ndarray, limits: np.ndarray | None = None) -> np.ndarr
     Returns:
         (T, 23, 3) [rad], > 0 outside, <= 0 inside.
     """
-    lim = (JOINT_LIMITS if limits is None else np.asarray(limits, dtype=np.float64))[1:]
+    lim = _joint_limits(limits)
     euler = euler[:, 1:]
     return np.maximum(euler - lim[..., 1], lim[..., 0] - euler)
+
+
+def _joint_limits(limits: np.ndarray | None) -> np.ndarray:
+    """(23, 3, 2) [rad] the limits of the joints below the root: ``limits``'s, :data:`JOINT_LIMITS` when None."""
+    return (JOINT_LIMITS if limits is None else np.asarray(limits, dtype=np.float64))[1:]
 
 
 def pose_outliers(poses: np.ndarray, margin_deg: float = POSE_MARGIN_DEG, limits: np.ndarray | None = None
@@ -159,14 +164,13 @@ def pose_outliers(poses: np.ndarray, margin_deg: float = POSE_MARGIN_DEG, limits
     """
     euler = poses_to_euler(poses)
     excess = pose_excess(euler, limits)  # (T, 23, 3) [rad], > 0 outside
-    lim = (JOINT_LIMITS if limits is None else np.asarray(limits, dtype=np.float64))[1:]
     outside = excess > np.deg2rad(margin_deg)
     frames = np.flatnonzero(outside.any(axis=(1, 2)))
     if frames.size == 0:
         return None
     first = frames[0]
     joint, axis = np.unravel_index(int(np.argmax(excess[first])), excess[first].shape)
-    low, high = np.rad2deg(lim[joint, axis])
+    low, high = np.rad2deg(_joint_limits(limits)[joint, axis])
     return PoseOutlier(frames=frames.astype(np.int64), joint=JOINT_NAMES[joint + 1], axis="xyz"[axis],
                        angle_deg=float(np.rad2deg(euler[first, joint + 1, axis])), low_deg=float(low),
                        high_deg=float(high))
