@@ -83,7 +83,7 @@ def test_train_garment_refuses_an_existing_bundle_and_a_stage_without_that_garme
     err = capsys.readouterr().err
     assert "--test-motions" in err and "m.json" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "c").exists()
-    (tmp_path / "m.json").write_text("[]")  # an empty test set would fall back to nothing the user asked for
+    (tmp_path / "m.json").write_text("[]")  # refused, not read as the default
     assert main(["train-garment", str(SAMPLE), "-o", str(tmp_path / "c"),
                  "--test-motions", str(tmp_path / "m.json")]) == 2
     err = capsys.readouterr().err
