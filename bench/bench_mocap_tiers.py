@@ -16,6 +16,11 @@ detail tier. Per bake, over every frame of the clip:
   evaluated again here with ``LearnedGarment.evaluate(..., postprocess=False)``) and after it
   (the baked cache), on every fifth frame; and the post-process's count of the vertices it
   moved per frame;
+- skin through the garment (the specks and holes a close-up shows where no garment vertex is in the
+  body): on every fifth frame, the body vertices the rest garment covers
+  (:func:`~cloth_usd.core.postprocess.covered_at_rest`) that lie more than :data:`THROUGH_DEPTH` in front
+  of the nearest of its inner triangles along their own normal (within 1 cm of it), the median frame's
+  count and the most;
 - where (learned tiers, before the post-process): of the vertices inside the body, the share
   also inside in the skinning tier's garment of that frame, and the share nearest to each
   body part (the body joint that skins the nearest body triangle's first corner most), so a
@@ -43,8 +48,10 @@ from pxr import Sdf
 
 from cloth_usd.core.association import associate
 from cloth_usd.core.body import load_body_model, posed_vertices, shape_body
+from cloth_usd.core.features import vertex_normals
 from cloth_usd.core.frames import canonical_motion
 from cloth_usd.core.limits import pose_outliers
+from cloth_usd.core.postprocess import body_ahead, covered_at_rest, inner_triangles
 from cloth_usd.core.smpl import JOINT_NAMES
 from cloth_usd.datagen.simulate import body_side, unique_edges
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
@@ -54,6 +61,8 @@ from cloth_usd.usd.read import open_stage, read_motion, read_scene
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "samples" / "walk_tshirt" / "scene.usda"
 CLI = [sys.executable, "-m", "cloth_usd.cli"]
+#: [m] how far in front of a garment triangle a body vertex must lie to count as showing through it.
+THROUGH_DEPTH = 1e-3
 
 
 def _run(*args: str) -> str:
@@ -86,6 +95,15 @@ def _side(points: np.ndarray, body_points: np.ndarray, body_faces: np.ndarray) -
     """(N,) each of ``points``' signed distance to the body [m], negative inside
     (``penetration_fraction``'s measure); None for a non-finite frame."""
     return body_side(points, body_points, body_faces) if np.isfinite(points).all() else None
+
+
+def _ahead(points: np.ndarray, bodies: np.ndarray, normals: np.ndarray, inner: np.ndarray,
+           ring: np.ndarray) -> np.ndarray:
+    """(S, V) how far [m] each body vertex of ``bodies`` (S, V, 3), unit ``normals``, lies in front of
+    the nearest of the garment ``points``' (S, N, 3) ``inner`` triangles (``ring`` around each vertex;
+    :func:`~cloth_usd.core.postprocess.inner_triangles`) along its normal, NaN where none is within 1 cm
+    (:func:`~cloth_usd.core.postprocess.body_ahead`)."""
+    return np.stack([body_ahead(points[t], inner, ring, bodies[t], normals[t])[0] for t in range(len(points))])
 
 
 def _inside(sides: list) -> tuple[np.ndarray, np.ndarray]:
@@ -126,6 +144,7 @@ def main(argv=None) -> int:
     rest, faces = garment.rest_points, garment.triangles
     edges = unique_edges(faces)
     energy = _bending(rest, faces)
+    inner, ring = inner_triangles(np.asarray(faces, dtype=np.int64), len(rest))
     rows = []
     for clip in args.clip:
         name, *frames = clip.split(":")
@@ -140,6 +159,9 @@ def main(argv=None) -> int:
         poses = _stage_poses(shot, times, body)
         bodies = posed_vertices(body, poses["betas"], poses["poses"], poses["transl"])
         sampled = np.arange(0, len(times), 5)
+        normals = vertex_normals(bodies[sampled], body.faces)
+        at_rest = posed_vertices(body, poses["betas"], np.zeros((1, 72)), np.zeros((1, 3)))[0]
+        covered = covered_at_rest(poses["rest"], faces, at_rest, vertex_normals(at_rest, body.faces))
         runs = [("skinning", None, skin_cache)]
         for bundle in bundles:
             for tier in ("coarse", "detail"):
@@ -156,6 +178,8 @@ def main(argv=None) -> int:
             p99_rest, p99_skin = np.percentile(vs_rest, 99, axis=1), np.percentile(vs_skin, 99, axis=1)
             sides = [_side(pts[t], bodies[t], body.faces) for t in sampled]
             inside, deep = _inside(sides)
+            through = np.count_nonzero((_ahead(pts[sampled], bodies[sampled], normals, inner, ring) > THROUGH_DEPTH)
+                                       & covered, axis=1)
             where = {}
             if bundle is None:  # the skinning tier, first: its sides serve the learned tiers' "where" too
                 before, skin_sides = (inside, deep), sides
@@ -175,6 +199,7 @@ def main(argv=None) -> int:
                    "postprocess_moved_per_frame": float(report.get("postprocess_moved", 0)) / max(len(times), 1),
                    "inside_before": float(np.mean(before[0])), "inside_1mm_before": float(np.mean(before[1])),
                    "inside_after": float(np.mean(inside)), "inside_1mm_after": float(np.mean(deep)),
+                   "through_median": float(np.median(through)), "through_max": int(through.max()),
                    "bending_j": float(np.mean([energy(p) for p in pts[::5]])) if energy else float("nan"),
                    "posed_outside": 0 if bundle is None or outside[bundle] is None
                    else int(outside[bundle].frames.size),
@@ -184,8 +209,9 @@ def main(argv=None) -> int:
     (out / "mocap_tiers.json").write_text(json.dumps(rows, indent=1))
     lines = ["| clip | frames | bundle | tier | guard: coarse / skinning | stretch vs rest p99 median / worst, max "
              "| vs skinning p99 median / worst, max | offset max mm | post-process moved / frame | inside before "
-             "(deeper than 1 mm) | inside after (deeper than 1 mm) | bending J | frames posed outside training |",
-             "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+             "(deeper than 1 mm) | inside after (deeper than 1 mm) | skin through the garment: median / most a frame "
+             "| bending J | frames posed outside training |",
+             "|---|---:|---|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
         lines.append(f"| {r['clip']} | {r['frames']} | {r['bundle']} | {r['tier']} | {r['fallback_coarse']} / "
                      f"{r['fallback_skinning']} | {r['stretch_rest_p99_median']:.2f} / {r['stretch_rest_p99_worst']:.2f}, "
@@ -193,7 +219,8 @@ def main(argv=None) -> int:
                      f"{r['stretch_skin_p99_worst']:.2f}, {r['stretch_skin_max']:.2f} | {r['offset_max_mm']:.0f} | "
                      f"{r['postprocess_moved_per_frame']:.0f} | {100 * r['inside_before']:.2f}% "
                      f"({100 * r['inside_1mm_before']:.2f}%) | {100 * r['inside_after']:.2f}% ({100 * r['inside_1mm_after']:.2f}%) | "
-                     f"{r['bending_j']:.2e} | {r['posed_outside'] if r['bundle'] != '-' else '-'} |")
+                     f"{r['through_median']:g} / {r['through_max']} | {r['bending_j']:.2e} | "
+                     f"{r['posed_outside'] if r['bundle'] != '-' else '-'} |")
     learned_rows = [r for r in rows if "inside_before_near" in r]
     if learned_rows:
         lines += ["", "Where the garment is inside the body before the post-process (every fifth frame):", "",

@@ -48,20 +48,16 @@ import numpy as np
 from cloth_usd.core.body import load_body_model, posed_vertices
 from cloth_usd.core.features import vertex_normals
 from cloth_usd.core.pipeline import pose_body, post_process
-from cloth_usd.core.postprocess import (LIMIT_CHECK_QUANTILE, LIMIT_MOVE_BOUND, STRAIN_LIMIT, body_ahead,
-                                        covered_at_rest, inner_triangles, limit_slides, mesh_edges,
-                                        push_out_of_surface)
+from cloth_usd.core.postprocess import (LIMIT_CHECK_QUANTILE, LIMIT_MOVE_BOUND, STRAIN_LIMIT, covered_at_rest,
+                                        inner_triangles, limit_slides, mesh_edges, push_out_of_surface)
 from cloth_usd.datagen.simulate import body_side, edge_ratios
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
 from cloth_usd.runtime.garment import LearnedGarment
 from cloth_usd.usd.read import open_stage, read_scene
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_mocap_tiers import _stage_poses  # noqa: E402  (the poses as the baker reads them)
+from bench_mocap_tiers import THROUGH_DEPTH, _ahead, _stage_poses  # noqa: E402  (as the held-out bench measures)
 
-
-#: [m] how far in front of the garment a body vertex must lie to count as through it.
-THROUGH_DEPTH = 1e-3
 
 
 def main(argv=None) -> int:
@@ -106,7 +102,7 @@ def main(argv=None) -> int:
             moved = np.linalg.norm(x - raw, axis=-1).max(axis=1)  # each frame's largest move from the models' garment
             p99 = np.percentile(s, 99, axis=1)
             side = np.stack([body_side(x[t], bodies[t], body.faces) for t in range(len(times))])
-            ahead = np.stack([body_ahead(x[t], inner, ring, bodies[t], normals[t])[0] for t in range(len(times))])
+            ahead = _ahead(x, bodies, normals, inner, ring)
             through = np.count_nonzero(ahead > THROUGH_DEPTH, axis=1)
             skin = np.count_nonzero((ahead > THROUGH_DEPTH) & covered, axis=1)
             r = {"shot": shot.stem, "bundle": bundle_dir.name, "stage": stage_name, "frames": len(times),
