@@ -59,7 +59,6 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_mocap_tiers import THROUGH_DEPTH, _ahead, _stage_poses  # noqa: E402  (as the held-out bench measures)
 
 
-
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--shot", action="append", required=True, help="a stage bench_mocap_tiers.py wrote (repeatable)")
