@@ -106,6 +106,13 @@ def _ahead(points: np.ndarray, bodies: np.ndarray, normals: np.ndarray, inner: n
     return np.stack([body_ahead(points[t], inner, ring, bodies[t], normals[t])[0] for t in range(len(points))])
 
 
+def _covered(body, betas: np.ndarray, rest_points: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(V,) bool the vertices of the body of ``betas``, at rest, that the rest garment covers
+    (:func:`~cloth_usd.core.postprocess.covered_at_rest`): the skin that can show through it."""
+    at_rest = posed_vertices(body, betas, np.zeros((1, 72)), np.zeros((1, 3)))[0]
+    return covered_at_rest(rest_points, faces, at_rest, vertex_normals(at_rest, body.faces))
+
+
 def _inside(sides: list) -> tuple[np.ndarray, np.ndarray]:
     """Per frame of :func:`_side` arrays, the fractions of the vertices inside the body and
     deeper than 1 mm in it (NaN for a non-finite frame)."""
@@ -160,8 +167,7 @@ def main(argv=None) -> int:
         bodies = posed_vertices(body, poses["betas"], poses["poses"], poses["transl"])
         sampled = np.arange(0, len(times), 5)
         normals = vertex_normals(bodies[sampled], body.faces)
-        at_rest = posed_vertices(body, poses["betas"], np.zeros((1, 72)), np.zeros((1, 3)))[0]
-        covered = covered_at_rest(poses["rest"], faces, at_rest, vertex_normals(at_rest, body.faces))
+        covered = _covered(body, poses["betas"], poses["rest"], faces)
         runs = [("skinning", None, skin_cache)]
         for bundle in bundles:
             for tier in ("coarse", "detail"):

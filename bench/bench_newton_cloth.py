@@ -41,7 +41,7 @@ import torch
 
 from cloth_usd.core.body import posed_vertices
 from cloth_usd.core.features import vertex_normals
-from cloth_usd.core.postprocess import covered_at_rest, inner_triangles
+from cloth_usd.core.postprocess import inner_triangles
 from cloth_usd.core.skinning import skin_garment
 from cloth_usd.datagen.simulate import body_side, edge_ratios, unique_edges
 from cloth_usd.nn.data import load_dataset
@@ -50,7 +50,7 @@ from cloth_usd.runtime.bundle import load_bundle
 from cloth_usd.evaluate import garment_reads, learned_garment
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_mocap_tiers import THROUGH_DEPTH, _ahead  # noqa: E402  (as the held-out bench counts skin through)
+from bench_mocap_tiers import THROUGH_DEPTH, _ahead, _covered  # noqa: E402  (as the held-out bench counts skin through)
 
 STEP = 5
 
@@ -104,9 +104,8 @@ def main(argv: list[str] | None = None) -> int:
         edges = unique_edges(clip.pair.faces)
         bodies = posed_vertices(body, clip.pair.betas, clip.poses[::STEP], clip.transl[::STEP])  # once, every tier
         truth = clip.positions.astype(np.float64)
-        at_rest = posed_vertices(body, clip.pair.betas, np.zeros((1, 72)), np.zeros((1, 3)))[0]
         skin = (vertex_normals(bodies, body.faces), *inner_triangles(clip.pair.faces, len(clip.rest_points)),
-                covered_at_rest(clip.rest_points, clip.pair.faces, at_rest, vertex_normals(at_rest, body.faces)))
+                _covered(body, clip.pair.betas, clip.rest_points, clip.pair.faces))
         skinned = skin_garment(clip.pair.binding, clip.poses, clip.transl, body.parents)
         outs = {"Newton": (truth, truth), "skinning": (skinned, skinned)}
         for b in bundles:

@@ -48,15 +48,15 @@ import numpy as np
 from cloth_usd.core.body import load_body_model, posed_vertices
 from cloth_usd.core.features import vertex_normals
 from cloth_usd.core.pipeline import pose_body, post_process
-from cloth_usd.core.postprocess import (LIMIT_CHECK_QUANTILE, LIMIT_MOVE_BOUND, STRAIN_LIMIT, covered_at_rest,
-                                        inner_triangles, limit_slides, mesh_edges, push_out_of_surface)
+from cloth_usd.core.postprocess import (LIMIT_CHECK_QUANTILE, LIMIT_MOVE_BOUND, STRAIN_LIMIT, inner_triangles,
+                                        limit_slides, mesh_edges, push_out_of_surface)
 from cloth_usd.datagen.simulate import body_side, edge_ratios
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
 from cloth_usd.runtime.garment import LearnedGarment
 from cloth_usd.usd.read import open_stage, read_scene
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_mocap_tiers import THROUGH_DEPTH, _ahead, _stage_poses  # noqa: E402  (as the held-out bench measures)
+from bench_mocap_tiers import THROUGH_DEPTH, _ahead, _covered, _stage_poses  # noqa: E402  (the held-out bench's)
 
 
 def main(argv=None) -> int:
@@ -93,8 +93,7 @@ def main(argv=None) -> int:
         bodies = posed_vertices(body, poses["betas"], model_poses, model_transl)
         normals = vertex_normals(bodies, body.faces)
         patch = learned.pair.patch
-        at_rest = posed_vertices(body, poses["betas"], np.zeros((1, 72)), np.zeros((1, 3)))[0]
-        covered = covered_at_rest(rest, poses["faces"], at_rest, vertex_normals(at_rest, body.faces))
+        covered = _covered(body, poses["betas"], rest, poses["faces"])
 
         def row(stage_name, x, ms, before=None):
             s = edge_ratios(x, rest, edges)
