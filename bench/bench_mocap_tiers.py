@@ -18,8 +18,9 @@ detail tier. Per bake, over every frame of the clip:
   moved per frame;
 - skin through the garment (the specks and holes a close-up shows where no garment vertex is in the
   body): on every fifth frame, the body vertices the rest garment covers
-  (:func:`~cloth_usd.core.postprocess.covered_at_rest`) that lie more than :data:`THROUGH_DEPTH` in front
-  of the nearest of its inner triangles along their own normal (within 1 cm of it), the median frame's
+  (:func:`~cloth_usd.core.postprocess.covered_at_rest`) that lie more than
+  :data:`~cloth_usd.core.postprocess.THROUGH_DEPTH` in front of the nearest of its inner triangles along
+  their own normal (within 1 cm of it), the median frame's
   count and the most;
 - where (learned tiers, before the post-process): of the vertices inside the body, the share
   also inside in the skinning tier's garment of that frame, and the share nearest to each
@@ -51,7 +52,7 @@ from cloth_usd.core.body import load_body_model, posed_vertices, shape_body
 from cloth_usd.core.features import vertex_normals
 from cloth_usd.core.frames import canonical_motion
 from cloth_usd.core.limits import pose_outliers
-from cloth_usd.core.postprocess import body_ahead, covered_at_rest, inner_triangles
+from cloth_usd.core.postprocess import THROUGH_DEPTH, body_ahead, covered_at_rest, inner_triangles
 from cloth_usd.core.smpl import JOINT_NAMES
 from cloth_usd.datagen.simulate import body_side, unique_edges
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
@@ -61,8 +62,6 @@ from cloth_usd.usd.read import open_stage, read_motion, read_scene
 ROOT = Path(__file__).resolve().parents[1]
 SAMPLE = ROOT / "samples" / "walk_tshirt" / "scene.usda"
 CLI = [sys.executable, "-m", "cloth_usd.cli"]
-#: [m] how far in front of a garment triangle a body vertex must lie to count as showing through it.
-THROUGH_DEPTH = 1e-3
 
 
 def _run(*args: str) -> str:

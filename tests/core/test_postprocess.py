@@ -321,6 +321,27 @@ def test_the_strain_limiter_leaves_a_non_finite_frame_for_the_guard_and_checks_i
         limiter(rest[None, :5])
 
 
+def test_the_strain_limiter_leaves_the_free_edges_of_each_frame_as_they_are():
+    from cloth_usd.core.postprocess import StrainLimiter
+
+    rest, faces = _square_grid()
+    limiter = StrainLimiter(rest, faces, limit=1.1)
+    stretched = rest * [1.5, 1.0, 1.0]
+    both = np.stack([stretched, stretched])
+    free = np.zeros((2, len(limiter.edges)), dtype=bool)
+    free[1] = True  # every edge free in the second frame: nothing moves there
+    out = limiter(both, free=free)
+    np.testing.assert_allclose(out[0], limiter(stretched[None])[0], atol=1e-6)
+    np.testing.assert_allclose(out[1], stretched, atol=5e-6)  # float32 solves
+    # the edges of the left half free: they stay longer than the limited right half's
+    left = (stretched[limiter.edges, 0] < stretched[:, 0].mean()).all(axis=1)
+    half = limiter(stretched[None], free=left[None])[0]
+    ratio = np.linalg.norm(half[limiter.edges[:, 1]] - half[limiter.edges[:, 0]], axis=1) / limiter.rest_lengths
+    assert ratio[left].mean() > 1.2 > 1.13 > ratio[~left].max(), (ratio[left].mean(), ratio[~left].max())
+    with pytest.raises(ArgumentError, match="free edges"):
+        limiter(both, free=free[:1])
+
+
 def _lift_scene(arm: bool = False):
     """A 5 x 5 garment sheet (2 cm cells) 2 mm above a flat body (normals +z) whose vertex under the
     middle of an inner garment triangle is raised 4 mm, 2 mm in front of the garment; with ``arm``,
@@ -386,6 +407,30 @@ def test_a_lift_that_would_put_the_cloth_into_another_part_of_the_body_or_stretc
         lift(garment[:, :5], body, normals, body_faces, np.arange(body.shape[1]))
     with pytest.raises(ArgumentError, match="candidates"):
         lift(garment, body, normals, body_faces, np.arange(5))
+
+
+def test_the_skin_bared_through_a_garment_is_found_with_the_cloth_around_it():
+    from cloth_usd.core.postprocess import TriangleLift
+
+    garment, faces, body, normals, _, _ = _lift_scene()  # a body vertex 2 mm in front of triangle 12
+    lift = TriangleLift(faces, garment[0], body[0], normals[0])
+    cand = np.arange(body.shape[1])
+    broken = garment.copy()
+    broken[0, 0, 0] = np.nan
+    three = np.concatenate([garment, garment + [0.0, 0.0, 0.003], broken])  # raised 3 mm: covered; left to the guard
+    body3, normals3 = np.repeat(body, 3, axis=0), np.repeat(normals, 3, axis=0)
+    count, found = lift.bared(three, body3, normals3, cand, tolerance=0, rings=0)
+    assert count.tolist() == [1, 0, -1]
+    assert [np.flatnonzero(f).tolist() for f in found] == [sorted(faces[12]), [], []]
+    ring = np.flatnonzero(lift.bared(garment, body, normals, cand, tolerance=0, rings=1)[1][0])
+    assert set(faces[12]) < set(ring) == set(lift.faces[np.isin(lift.faces, faces[12]).any(axis=1)].ravel())
+    count, found = lift.bared(garment, body, normals, cand, tolerance=1)  # one body vertex: within the tolerance
+    assert count.tolist() == [1] and not found.any()
+    count, found = lift.bared(garment, body, normals, cand, tolerance=0, depth=0.003)  # 2 mm in front, not 3
+    assert count.tolist() == [0] and not found.any()
+    flipped = TriangleLift(faces[:, ::-1], garment[0], body[0], normals[0])  # facing away from the body
+    count, found = flipped.bared(garment, body, normals, cand, tolerance=0)
+    assert count.tolist() == [0] and not found.any()
 
 
 def test_the_skin_a_rest_garment_covers_is_what_lies_straight_under_it():
