@@ -41,7 +41,7 @@ import torch
 
 from cloth_usd.core.body import posed_vertices
 from cloth_usd.core.features import vertex_normals
-from cloth_usd.core.postprocess import inner_triangles
+from cloth_usd.core.postprocess import THROUGH_DEPTH, inner_triangles
 from cloth_usd.core.skinning import skin_garment
 from cloth_usd.datagen.simulate import body_side, edge_ratios, unique_edges
 from cloth_usd.nn.data import load_dataset
@@ -50,7 +50,7 @@ from cloth_usd.runtime.bundle import load_bundle
 from cloth_usd.evaluate import garment_reads, learned_garment
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_mocap_tiers import THROUGH_DEPTH, _ahead, _covered  # noqa: E402  (as the held-out bench counts skin through)
+from bench_mocap_tiers import _ahead, _covered  # noqa: E402  (as the held-out bench counts skin through)
 
 STEP = 5
 

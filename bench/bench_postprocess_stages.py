@@ -48,15 +48,15 @@ import numpy as np
 from cloth_usd.core.body import load_body_model, posed_vertices
 from cloth_usd.core.features import vertex_normals
 from cloth_usd.core.pipeline import pose_body, post_process
-from cloth_usd.core.postprocess import (LIMIT_CHECK_QUANTILE, LIMIT_MOVE_BOUND, STRAIN_LIMIT, inner_triangles,
-                                        limit_slides, mesh_edges, push_out_of_surface)
+from cloth_usd.core.postprocess import (LIMIT_CHECK_QUANTILE, LIMIT_MOVE_BOUND, STRAIN_LIMIT, THROUGH_DEPTH,
+                                        inner_triangles, limit_slides, mesh_edges, push_out_of_surface)
 from cloth_usd.datagen.simulate import body_side, edge_ratios
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
 from cloth_usd.runtime.garment import LearnedGarment
 from cloth_usd.usd.read import open_stage, read_scene
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_mocap_tiers import THROUGH_DEPTH, _ahead, _covered, _stage_poses  # noqa: E402  (the held-out bench's)
+from bench_mocap_tiers import _ahead, _covered, _stage_poses  # noqa: E402  (the held-out bench's)
 
 
 def main(argv=None) -> int:

@@ -201,14 +201,9 @@ def test_a_fit_far_outside_training_is_clamped_for_the_models():
     np.testing.assert_array_equal(inside.alpha, inside.alpha_measured)
 
 
-def test_the_post_process_pushes_a_frame_without_the_strain_limit_where_the_limit_would_tear_it():
-    """A frame that the strain limit and the push leave more stretched than the models made it
-    is pushed without the limit (where the body leaves a garment too little cloth, the limit pulls
-    it into the body and the push tears it: trousers in a kick), as is a frame the limit would move
-    too far (it slides cloth along the body: a trouser leg off a raised thigh); every other frame
-    is limited."""
-    from cloth_usd.core.pipeline import post_process
-    from cloth_usd.core.postprocess import LIMIT_MOVE_BOUND, StrainLimiter, push_out_of_surface
+def _walking_shirt():
+    """A 600-vertex T-shirt on the default body over three frames of ``walk_cycle``, as the skinning tier
+    makes it: ``(body, rest, faces, pair, posed, skinned (3, N, 3))``."""
     from cloth_usd.core.skinning import skin_garment
 
     body = load_body_model()
@@ -217,7 +212,19 @@ def test_the_post_process_pushes_a_frame_without_the_strain_limit_where_the_limi
     pair = prepare_pair(body, betas, rest, faces, find_bundle("tshirt").fit)
     poses, transl = walk_cycle(3)
     posed = pose_body(body, pair, poses, transl)
-    raw = skin_garment(pair.binding, poses, transl, body.parents)
+    return body, rest, faces, pair, posed, skin_garment(pair.binding, poses, transl, body.parents)
+
+
+def test_the_post_process_pushes_a_frame_without_the_strain_limit_where_the_limit_would_tear_it():
+    """A frame that the strain limit and the push leave more stretched than the models made it
+    is pushed without the limit (where the body leaves a garment too little cloth, the limit pulls
+    it into the body and the push tears it: trousers in a kick), as is a frame the limit would move
+    too far (it slides cloth along the body: a trouser leg off a raised thigh); every other frame
+    is limited."""
+    from cloth_usd.core.pipeline import post_process
+    from cloth_usd.core.postprocess import LIMIT_MOVE_BOUND, StrainLimiter, push_out_of_surface
+
+    body, rest, faces, pair, posed, raw = _walking_shirt()
 
     def push(m):
         return push_out_of_surface(m, posed.patch_points, posed.patch_normals, pair.patch.faces, pair.patch.contact,
@@ -272,15 +279,8 @@ def test_the_post_process_solves_the_limit_again_where_it_bared_the_skin(monkeyp
     them, pushed and lifted; a frame with no more than specks showing is left as it was."""
     import cloth_usd.core.pipeline as pipeline
     from cloth_usd.core.postprocess import BARED_TOLERANCE, StrainLimiter, TriangleLift, push_out_of_surface
-    from cloth_usd.core.skinning import skin_garment
 
-    body = load_body_model()
-    betas = np.zeros(10)
-    rest, faces = make_tshirt(body, betas, TShirtParams(target_vertices=600))
-    pair = prepare_pair(body, betas, rest, faces, find_bundle("tshirt").fit)
-    poses, transl = walk_cycle(3)
-    posed = pose_body(body, pair, poses, transl)
-    raw = skin_garment(pair.binding, poses, transl, body.parents)
+    body, rest, faces, pair, posed, raw = _walking_shirt()
     under = pair.patch.vertices[pair.patch.contact]
     normals = vertex_normals(pair.v_shaped, body.faces)
     # the stretch check would push such frames without the limit: out of the way, the second solve alone
