@@ -475,7 +475,10 @@ LIFT_REACH = 0.01
 LIFT_MARGIN = 0.0005
 #: The longest :class:`TriangleLift` may make an edge, over its rest length (the issue's bound on a frame's
 #: longest edge): on a tight top on CMU 13_10 (100 frames) a lift without it took the frames with an edge
-#: past 1.5 from 50 to 89, with it to 59.
+#: past 1.5 from 50 to 89, with it to 59. Measured once, with every lift the check took back put back at
+#: once, it left an edge stretched between a vertex taken back and its lifted neighbour: MakeHuman's sport
+#: top on its own bundle (trained again in stop 62), 24 of the 100 frames with an edge past 1.5; measured
+#: until none is, 7.
 LIFT_STRETCH = 1.5
 #: [m] how far from the rest garment a body vertex may lie and be covered by it (:func:`covered_at_rest`).
 COVER_REACH = 0.03
@@ -564,21 +567,28 @@ class TriangleLift:
     (a sleeve's inner side next to the torso does not), the triangle's corners move along the body
     vertex's normal until it is ``margin`` behind: by their barycentric weights over their sum of
     squares (the least moves that do it). A garment vertex asked to move by several body vertices takes
-    the largest move.
+    the largest move. With ``body_faces``, the midpoints of the body's edges between covered vertices are
+    measured and lifted off the same way (the body between its vertices lies in front of a triangle too).
 
     Then the checks: a lifted vertex that the push would move (inside the body, measured as the push
     measures it: under the arm, a lift off the torso can go into the arm) goes back where it was, as
-    do both ends of an edge the lift stretched past :data:`LIFT_STRETCH` times its rest length.
+    do both ends of an edge the lift stretched past :data:`LIFT_STRETCH` times its rest length; the edges
+    are then measured again with those back, until the lift stretches none (a vertex lifted beside one taken
+    back can leave their edge stretched).
 
     Args:
         faces: (M, 3) int the garment's triangles; rest_points: (N, 3) the rest garment [m].
         body_points, body_normals: (K, 3) the candidate body vertices the lift is called with, at rest
             (the garment's frame) [m], and their unit normals: which of them the garment covers.
+        body_faces: (M', 3) int the body's triangles over those candidates: the midpoint of each of their
+            edges between two covered vertices is lifted off too, its normal the average of theirs (the skin
+            between the body's vertices, where a tight top shows most of its specks); None: the vertices alone.
         reach, margin: [m], see above.
     """
 
     def __init__(self, faces: np.ndarray, rest_points: np.ndarray, body_points: np.ndarray,
-                 body_normals: np.ndarray, *, reach: float = LIFT_REACH, margin: float = LIFT_MARGIN) -> None:
+                 body_normals: np.ndarray, *, body_faces: np.ndarray | None = None, reach: float = LIFT_REACH,
+                 margin: float = LIFT_MARGIN) -> None:
         self.num_vertices = len(rest_points)
         self.faces, self.ring = inner_triangles(faces, self.num_vertices)
         self.edges = mesh_edges(self.faces)
@@ -586,6 +596,15 @@ class TriangleLift:
         rest = np.asarray(rest_points, dtype=np.float64)
         self.rest_lengths = vector_lengths(rest[self.all_edges[:, 1]] - rest[self.all_edges[:, 0]])
         self.cover = np.flatnonzero(covered_at_rest(rest_points, faces, body_points, body_normals))
+        # the body's edges between two covered vertices: their midpoints are lifted off too
+        covered = np.zeros(len(body_points), dtype=bool)
+        covered[self.cover] = True
+        edges = mesh_edges(body_faces) if body_faces is not None else np.zeros((0, 2), dtype=np.int64)
+        self.cover_edges = edges[covered[edges].all(axis=1)]
+        # each such edge's first end among the covered vertices: the midpoint is measured around that end's nearest
+        # garment vertex (half a body edge away). A search of its own counted the skin through within one point at
+        # the median on two clips and cost 12 ms a frame on the sample shirt's salsa against 4.4
+        self._edge_end = np.searchsorted(self.cover, self.cover_edges[:, 0])
         # (N, 1 + K) each vertex and its neighbours along the inner triangles' edges (the corners of the
         # triangles around it), padded with itself
         table = neighbour_table(directed_edges(self.faces, self.num_vertices), self.num_vertices,
@@ -620,11 +639,11 @@ class TriangleLift:
         lifted = np.zeros(p.shape[0], dtype=np.int64)
         if not self.cover.size or not self.faces.size:
             return p, lifted
-        covered = cand[self.cover]
+        covered, ends = cand[self.cover], cand[self.cover_edges]
         frames, rows, moves = [], [], []
         for t in range(p.shape[0]):
             if np.isfinite(p[t]).all():
-                vertex, move = self._moves(p[t], b[t, covered], n[t, covered])
+                vertex, move = self._moves(p[t], *self._skin(b[t], n[t], covered, ends), self._edge_end)
                 frames.append(np.full(vertex.size, t))
                 rows.append(vertex)
                 moves.append(move)
@@ -639,16 +658,22 @@ class TriangleLift:
         pushed = push_out_of_surface(q, b, n, body_faces, cand, margin=0.0, rings=rings, trees=trees)[0]
         keep = (pushed[frame, slot] == q[frame, slot]).all(axis=1)
         # nor may it stretch an edge past LIFT_STRETCH times its rest length, and further than it was (only
-        # an edge at a lifted vertex can)
+        # an edge at a lifted vertex can): such an edge's lifted ends go back, and the edges are measured again
+        # with them back (a lift kept beside one taken back can leave their edge stretched), until none is
         at_lifted = np.isin(self.all_edges, row).any(axis=1)
-        e, rest_lengths, lifted_p = self.all_edges[at_lifted], self.rest_lengths[at_lifted], p.copy()
-        lifted_p[frame, row] = q[frame, slot]
-        after = vector_lengths(lifted_p[:, e[:, 1]] - lifted_p[:, e[:, 0]])
-        at, over = np.nonzero((after > LIFT_STRETCH * rest_lengths)
-                              & (after > vector_lengths(p[:, e[:, 1]] - p[:, e[:, 0]])))
-        stretched = np.zeros(p.shape[:2], dtype=bool)
-        stretched[at, e[over, 0]] = stretched[at, e[over, 1]] = True
-        keep &= ~stretched[frame, row]
+        e, longest = self.all_edges[at_lifted], LIFT_STRETCH * self.rest_lengths[at_lifted]
+        before = vector_lengths(p[:, e[:, 1]] - p[:, e[:, 0]])
+        while True:
+            lifted_p = p.copy()
+            lifted_p[frame[keep], row[keep]] = q[frame[keep], slot[keep]]
+            after = vector_lengths(lifted_p[:, e[:, 1]] - lifted_p[:, e[:, 0]])
+            at, over = np.nonzero((after > longest) & (after > before))
+            stretched = np.zeros(p.shape[:2], dtype=bool)
+            stretched[at, e[over, 0]] = stretched[at, e[over, 1]] = True
+            back = keep & stretched[frame, row]
+            if not back.any():
+                break
+            keep &= ~back
         p[frame[keep], row[keep]] = q[frame[keep], slot[keep]]
         np.add.at(lifted, frame[keep], 1)
         return p, lifted
@@ -685,16 +710,30 @@ class TriangleLift:
                     region[t, near] = True
         return count, region
 
-    def _front(self, g: np.ndarray, bp: np.ndarray, bn: np.ndarray,
-               depth: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """One frame: the covered body vertices ``bp`` (K', 3) with unit normals ``bn`` (K', 3) that lie
+    @staticmethod
+    def _skin(b: np.ndarray, n: np.ndarray, covered: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """One frame's points of the covered skin: the body vertices ``b[covered]`` (with unit normals ``n``) and
+        the midpoints of the body edges ``ends`` (E', 2) between them, with their ends' normals averaged."""
+        if not ends.size:
+            return b[covered], n[covered]
+        m = n[ends[:, 0]] + n[ends[:, 1]]
+        m /= np.maximum(vector_lengths(m), 1e-12)[:, None]
+        return np.concatenate([b[covered], 0.5 * (b[ends[:, 0]] + b[ends[:, 1]])]), np.concatenate([n[covered], m])
+
+    def _front(self, g: np.ndarray, bp: np.ndarray, bn: np.ndarray, depth: float,
+               edge_end: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """One frame: the covered body points ``bp`` (K', 3) with unit normals ``bn`` (K', 3) that lie
         more than ``depth`` [m] in front of the closest of the garment ``g``'s (N, 3) inner triangles within
         ``reach``, and the triangle faces the way they do: ``(rows (H,), ahead (H,) [m], barycentric (H, 3),
-        corners (H, 3))``."""
+        corners (H, 3))``. With ``edge_end`` (E',), the last E' points are body edges' midpoints, measured
+        around the nearest garment vertex of the point (of the first K' - E') at each one's end."""
         e = g[self.edges[:, 0]] - g[self.edges[:, 1]]
         # a point of a triangle lies within its longest edge / sqrt(3) of one of its corners
         longest = float(np.sqrt(np.max(np.einsum("ec,ec->e", e, e))))
-        index = search_tree(g).query(bp, distance_upper_bound=self.reach + longest / np.sqrt(3.0))[1]
+        ends = 0 if edge_end is None else len(edge_end)
+        index = search_tree(g).query(bp[:len(bp) - ends], distance_upper_bound=self.reach + longest / np.sqrt(3.0))[1]
+        if ends:
+            index = np.concatenate([index, index[edge_end]])
         near = np.flatnonzero(index < g.shape[0])
         # a point of the triangles around a vertex lies in their corners' convex hull, so a body vertex
         # ``depth`` or more behind all those corners along its normal is so behind each triangle: only the
@@ -709,10 +748,11 @@ class TriangleLift:
         hit = hit[np.einsum("ic,ic->i", cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), bn[near[hit]]) > 0]
         return near[hit], ahead[hit], bary[hit], corners[hit]
 
-    def _moves(self, g: np.ndarray, bp: np.ndarray, bn: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _moves(self, g: np.ndarray, bp: np.ndarray, bn: np.ndarray,
+               edge_end: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """One frame: ``(vertices (L,) int64, moves (L, 3) [m])`` of the garment ``g`` (N, 3) off the
         covered body vertices ``bp`` (K', 3) with unit normals ``bn`` (K', 3)."""
-        rows, ahead, bary, corners = self._front(g, bp, bn, -self.margin)
+        rows, ahead, bary, corners = self._front(g, bp, bn, -self.margin, edge_end)
         if not rows.size:
             return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
         w = bary / np.einsum("ic,ic->i", bary, bary)[:, None]

@@ -118,7 +118,11 @@ class LearnedGarment:
         patch = self.pair.patch
         under = patch.vertices[patch.contact]  # the candidates the lift is called with, in their order
         normals = vertex_normals(self.pair.v_shaped, self.body.faces)
-        return TriangleLift(self._limit[1], self._limit[0], self.pair.v_shaped[under], normals[under])
+        slot = np.full(len(patch.vertices), -1)
+        slot[patch.contact] = np.arange(len(patch.contact))
+        faces = slot[patch.faces]  # the patch's triangles over the candidates (those with every corner one)
+        return TriangleLift(self._limit[1], self._limit[0], self.pair.v_shaped[under], normals[under],
+                            body_faces=faces[(faces >= 0).all(axis=1)])
 
     def strain_limiter(self, **settings) -> StrainLimiter:
         """A :class:`~cloth_usd.core.postprocess.StrainLimiter` of this garment's rest (``settings``:

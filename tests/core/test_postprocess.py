@@ -409,6 +409,64 @@ def test_a_lift_that_would_put_the_cloth_into_another_part_of_the_body_or_stretc
         lift(garment, body, normals, body_faces, np.arange(5))
 
 
+def test_a_lift_kept_beside_one_taken_back_does_not_leave_their_edge_stretched():
+    from cloth_usd.core.postprocess import LIFT_STRETCH, TriangleLift
+
+    garment, faces, body, normals, body_faces, _ = _lift_scene()  # the lift raises triangle 12's corners 2.5 mm
+    lift = TriangleLift(faces, garment[0], body[0], normals[0])
+    a, b, c = faces[12]
+    edges = [tuple(e) for e in lift.all_edges.tolist()]
+    outside = next(e for e in edges if a in e and not set(e) & {b, c})  # from ``a`` to a vertex the lift leaves
+
+    def at(e, ratio):  # the edge's rest length set so that it now lies at ``ratio`` times it
+        k = edges.index(tuple(sorted(e)))
+        lift.rest_lengths[k] = np.linalg.norm(garment[0, e[1]] - garment[0, e[0]]) / ratio
+
+    # lifting ``a`` stretches ``outside`` past LIFT_STRETCH: ``a`` goes back; then a-b, which the lift of both
+    # ends left as it was, has ``b`` 2.5 mm above ``a``: past LIFT_STRETCH too, so ``b`` goes back as well
+    at(outside, LIFT_STRETCH - 0.005)
+    at((a, b), LIFT_STRETCH - 0.003)
+    out, lifted = lift(garment, body, normals, body_faces, np.arange(body.shape[1]))
+    moved = np.flatnonzero(np.linalg.norm(out[0] - garment[0], axis=1) > 0)
+    assert moved.tolist() == [c] and lifted.tolist() == [1]
+    e = lift.all_edges
+    ratio = np.linalg.norm(out[0, e[:, 1]] - out[0, e[:, 0]], axis=1) / lift.rest_lengths
+    before = np.linalg.norm(garment[0, e[:, 1]] - garment[0, e[:, 0]], axis=1) / lift.rest_lengths
+    assert not np.any((ratio > LIFT_STRETCH) & (ratio > before))
+
+
+def test_the_lift_raises_the_cloth_off_the_skin_between_body_vertices():
+    from cloth_usd.core.postprocess import LIFT_MARGIN, TriangleLift, body_ahead, inner_triangles, mesh_edges
+
+    # a garment 4 mm above a flat body at 1.2 mm, but for a valley along its middle column (x = 4 cm) down to
+    # 1 mm: the body's vertices (a 1 cm grid at x = 0.5, 1.5, ... cm) all lie more than LIFT_MARGIN behind
+    # it (those beside the valley 0.55 mm), but the midpoints of the body's edges across the valley 0.2 mm in
+    # front of it: skin a render shows between the body's vertices
+    xs = np.arange(5) * 0.02
+    garment, faces, _ = _sheet(xs, xs, 0.004)
+    valley = np.flatnonzero(np.isclose(garment[:, 0], 0.04))
+    garment[valley, 2] = 0.001
+    bx = 0.005 + np.arange(8) * 0.01
+    body, body_faces, normals = _sheet(bx, bx, 0.0012)
+    cand = np.arange(len(body))
+    vertices_only = TriangleLift(faces, garment, body, normals)
+    out, lifted = vertices_only(garment[None], body[None], normals[None], body_faces, cand)
+    np.testing.assert_array_equal(out[0], garment)
+    surface = TriangleLift(faces, garment, body, normals, body_faces=body_faces)
+    out, lifted = surface(garment[None], body[None], normals[None], body_faces, cand)
+    moved = np.flatnonzero(np.linalg.norm(out[0] - garment, axis=1) > 0)
+    inner = valley[(garment[valley, 1] > 0.0) & (garment[valley, 1] < 0.08)]  # not on the sheet's rim
+    assert set(inner) <= set(moved) and lifted.tolist() == [moved.size]
+    np.testing.assert_allclose(out[0, moved, :2], garment[moved, :2])  # along the body's normal (+z)
+    # the midpoints in front of the cloth before, none after: all LIFT_MARGIN or more behind it
+    mids = body[mesh_edges(body_faces)].mean(axis=1)
+    up = np.tile([0.0, 0.0, 1.0], (len(mids), 1))
+    inner_faces, ring = inner_triangles(faces, len(garment))
+    before = body_ahead(garment, inner_faces, ring, mids, up)[0]
+    after = body_ahead(out[0], inner_faces, ring, mids, up)[0]
+    assert np.sum(before > 0) > 0 and np.nanmax(after) <= -LIFT_MARGIN + 1e-9
+
+
 def test_the_skin_bared_through_a_garment_is_found_with_the_cloth_around_it():
     from cloth_usd.core.postprocess import TriangleLift
 
