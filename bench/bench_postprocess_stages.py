@@ -52,7 +52,8 @@ from cloth_usd.core.body import load_body_model, posed_vertices
 from cloth_usd.core.features import vertex_normals
 from cloth_usd.core.pipeline import pose_body, post_process
 from cloth_usd.core.postprocess import (LIMIT_CHECK_QUANTILE, LIMIT_MOVE_BOUND, STRAIN_LIMIT, THROUGH_DEPTH,
-                                        inner_triangles, limit_slides, mesh_edges, push_out_of_surface)
+                                        edge_midpoints, inner_triangles, limit_slides, mesh_edges,
+                                        push_out_of_surface)
 from cloth_usd.datagen.simulate import body_side, edge_ratios
 from cloth_usd.runtime.bundle import find_bundle, load_bundle
 from cloth_usd.runtime.garment import LearnedGarment
@@ -99,10 +100,7 @@ def main(argv=None) -> int:
         covered = _covered(body, poses["betas"], rest, poses["faces"])
         # the skin between the body's vertices: the midpoints of its edges between two covered vertices
         ends = mesh_edges(body.faces)
-        ends = ends[covered[ends].all(axis=1)]
-        mids = 0.5 * (bodies[:, ends[:, 0]] + bodies[:, ends[:, 1]])
-        mid_normals = normals[:, ends[:, 0]] + normals[:, ends[:, 1]]
-        mid_normals /= np.linalg.norm(mid_normals, axis=-1, keepdims=True)
+        mids, mid_normals = edge_midpoints(bodies, normals, ends[covered[ends].all(axis=1)])
 
         def row(stage_name, x, ms, before=None):
             s = edge_ratios(x, rest, edges)

@@ -30,7 +30,7 @@ __all__ = ["push_out", "push_out_of_surface", "StrainLimiter", "check_strain_lim
            "garment_margin", "DEFAULT_MARGIN", "LIMB_RADIUS", "SEARCH_REACH", "SURFACE_CANDIDATES", "SURFACE_ROUNDS",
            "PLANE_REACH", "limit_slides", "LIMIT_CHECK_QUANTILE", "LIMIT_CHECK_TOLERANCE", "LIMIT_MOVE_BOUND",
            "TriangleLift", "inner_triangles", "body_ahead", "covered_at_rest", "LIFT_REACH",
-           "LIFT_MARGIN", "LIFT_STRETCH", "COVER_REACH"]
+           "LIFT_MARGIN", "LIFT_STRETCH", "COVER_REACH", "edge_midpoints"]
 
 #: Default clearance from the body surface [m] (2 mm).
 DEFAULT_MARGIN = 0.002
@@ -555,6 +555,16 @@ def covered_at_rest(rest_points: np.ndarray, faces: np.ndarray, body_points: np.
         return np.abs(ahead) >= 0.8 * distance  # NaN (not near) compares False
 
 
+def edge_midpoints(points: np.ndarray, normals: np.ndarray, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(midpoints (..., E, 3), unit normals (..., E, 3))`` of the ``edges`` (E, 2) of a mesh whose vertices are
+    ``points`` (..., V, 3) with unit ``normals``: each normal the average of its ends' (the skin between a body's
+    vertices, which :class:`TriangleLift` lifts the garment off and the benches count)."""
+    p, n = np.asarray(points, dtype=np.float64), np.asarray(normals, dtype=np.float64)
+    m = n[..., edges[:, 0], :] + n[..., edges[:, 1], :]
+    m /= np.maximum(vector_lengths(m), 1e-12)[..., None]
+    return 0.5 * (p[..., edges[:, 0], :] + p[..., edges[:, 1], :]), m
+
+
 class TriangleLift:
     """The detail tier's last step: lift the garment's triangles off the body vertices in front of them.
 
@@ -713,12 +723,11 @@ class TriangleLift:
     @staticmethod
     def _skin(b: np.ndarray, n: np.ndarray, covered: np.ndarray, ends: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One frame's points of the covered skin: the body vertices ``b[covered]`` (with unit normals ``n``) and
-        the midpoints of the body edges ``ends`` (E', 2) between them, with their ends' normals averaged."""
+        the midpoints of the body edges ``ends`` (E', 2) between them (:func:`edge_midpoints`)."""
         if not ends.size:
             return b[covered], n[covered]
-        m = n[ends[:, 0]] + n[ends[:, 1]]
-        m /= np.maximum(vector_lengths(m), 1e-12)[:, None]
-        return np.concatenate([b[covered], 0.5 * (b[ends[:, 0]] + b[ends[:, 1]])]), np.concatenate([n[covered], m])
+        mids, normals = edge_midpoints(b, n, ends)
+        return np.concatenate([b[covered], mids]), np.concatenate([n[covered], normals])
 
     def _front(self, g: np.ndarray, bp: np.ndarray, bn: np.ndarray, depth: float,
                edge_end: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -436,7 +436,8 @@ def test_a_lift_kept_beside_one_taken_back_does_not_leave_their_edge_stretched()
 
 
 def test_the_lift_raises_the_cloth_off_the_skin_between_body_vertices():
-    from cloth_usd.core.postprocess import LIFT_MARGIN, TriangleLift, body_ahead, inner_triangles, mesh_edges
+    from cloth_usd.core.postprocess import (LIFT_MARGIN, TriangleLift, body_ahead, edge_midpoints, inner_triangles,
+                                            mesh_edges)
 
     # a garment 4 mm above a flat body at 1.2 mm, but for a valley along its middle column (x = 4 cm) down to
     # 1 mm: the body's vertices (a 1 cm grid at x = 0.5, 1.5, ... cm) all lie more than LIFT_MARGIN behind
@@ -459,8 +460,8 @@ def test_the_lift_raises_the_cloth_off_the_skin_between_body_vertices():
     assert set(inner) <= set(moved) and lifted.tolist() == [moved.size]
     np.testing.assert_allclose(out[0, moved, :2], garment[moved, :2])  # along the body's normal (+z)
     # the midpoints in front of the cloth before, none after: all LIFT_MARGIN or more behind it
-    mids = body[mesh_edges(body_faces)].mean(axis=1)
-    up = np.tile([0.0, 0.0, 1.0], (len(mids), 1))
+    mids, up = edge_midpoints(body, normals, mesh_edges(body_faces))
+    np.testing.assert_allclose(up, np.tile([0.0, 0.0, 1.0], (len(mids), 1)))
     inner_faces, ring = inner_triangles(faces, len(garment))
     before = body_ahead(garment, inner_faces, ring, mids, up)[0]
     after = body_ahead(out[0], inner_faces, ring, mids, up)[0]
