@@ -672,11 +672,10 @@ class TriangleLift:
         # with them back (a lift kept beside one taken back can leave their edge stretched), until none is
         at_lifted = np.isin(self.all_edges, row).any(axis=1)
         e, longest = self.all_edges[at_lifted], LIFT_STRETCH * self.rest_lengths[at_lifted]
-        before = vector_lengths(p[:, e[:, 1]] - p[:, e[:, 0]])
+        before, original = vector_lengths(p[:, e[:, 1]] - p[:, e[:, 0]]), p[frame, row]
+        p[frame[keep], row[keep]] = q[frame[keep], slot[keep]]
         while True:
-            lifted_p = p.copy()
-            lifted_p[frame[keep], row[keep]] = q[frame[keep], slot[keep]]
-            after = vector_lengths(lifted_p[:, e[:, 1]] - lifted_p[:, e[:, 0]])
+            after = vector_lengths(p[:, e[:, 1]] - p[:, e[:, 0]])
             at, over = np.nonzero((after > longest) & (after > before))
             stretched = np.zeros(p.shape[:2], dtype=bool)
             stretched[at, e[over, 0]] = stretched[at, e[over, 1]] = True
@@ -684,7 +683,7 @@ class TriangleLift:
             if not back.any():
                 break
             keep &= ~back
-        p[frame[keep], row[keep]] = q[frame[keep], slot[keep]]
+            p[frame[back], row[back]] = original[back]  # taken back; the others stay lifted
         np.add.at(lifted, frame[keep], 1)
         return p, lifted
 
