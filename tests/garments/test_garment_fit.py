@@ -12,7 +12,7 @@ import pytest
 
 from cloth_usd.cli import main
 from cloth_usd.core.body import lbs, load_body_model, shape_body
-from cloth_usd.garments.fit import FitConfig, fit_garment, triangulate_polygons
+from cloth_usd.garments.fit import FitConfig, fit_garment, lift_off_skin, triangulate_polygons
 from cloth_usd.garments.mhclo import Mhclo, bind_mhclo, load_hm08_map, read_mhclo
 from cloth_usd.garments.source import GarmentFitError, SourceMesh, read_glb, read_obj
 
@@ -552,3 +552,63 @@ def test_hot_pants_keep_their_short_legs_and_a_short_skirt_or_a_slit_shirt_goes(
     flaps = shirt_f[~np.any((low & side)[shirt_f], axis=1)]
     whole = np.ones(len(shirt), bool)
     assert not has_legs(shirt, flaps, whole, pelvis)
+
+
+# --------------------------------------------------------------------------- the lift off the skin
+
+
+def _grid(n, size, height):
+    """A square grid of n x n vertices, ``size`` [m] wide, facing +z, its heights ``height(points)``."""
+    xs = np.linspace(-size / 2, size / 2, n)
+    x, y = np.meshgrid(xs, xs, indexing="ij")
+    points = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], axis=1)
+    i = (np.arange(n - 1)[:, None] * n + np.arange(n - 1)[None]).ravel()
+    faces = np.concatenate([np.stack([i, i + n, i + n + 1], 1), np.stack([i, i + n + 1, i + 1], 1)])
+    points[:, 2] = height(points)
+    return points, faces
+
+
+def test_lift_off_skin_lifts_a_coarse_garment_off_a_bump_between_its_vertices():
+    """A bump of the skin 5 mm high between the vertices of a cloth 2 mm over the skin (3.75 cm apart): it
+    lies in front of the cloth's triangles until the lift, then at least the margin behind them; the cloth
+    away from the bump stays where it was."""
+    from cloth_usd.core.features import vertex_normals
+    from cloth_usd.core.postprocess import body_ahead, inner_triangles
+
+    def bump(p):
+        return 0.005 * np.exp(-((p[:, 0] - 0.013) ** 2 + (p[:, 1] - 0.007) ** 2) / (2 * 0.01 ** 2))
+
+    skin, skin_faces = _grid(61, 0.3, bump)
+    cloth, cloth_faces = _grid(9, 0.3, lambda p: np.full(len(p), 0.002))
+    lifted, (before, after) = lift_off_skin(cloth, cloth_faces, skin, skin_faces, margin=0.002)
+    assert before > 0 and after == 0, (before, after)
+    inner, ring = inner_triangles(cloth_faces, len(cloth))
+    ahead = body_ahead(lifted, inner, ring, skin, vertex_normals(skin, skin_faces))[0]
+    assert np.nanmax(ahead) <= -0.002 + 1e-9
+    ahead_unlifted = body_ahead(cloth, inner, ring, skin, vertex_normals(skin, skin_faces))[0]
+    assert np.nanmax(ahead_unlifted) > 0.001  # the test's bump does poke through
+    moved = np.linalg.norm(lifted - cloth, axis=1)
+    far = np.linalg.norm(cloth[:, :2] - [0.013, 0.007], axis=1) > 0.08
+    assert moved[far].max() < 1e-6 and moved.max() > 0.003
+
+
+def test_fit_lifts_a_makehuman_top_off_the_skin_between_its_vertices(body):
+    """MakeHuman's top fitted without the lift lets body vertices through its triangles; with it (the default)
+    fewer, each vertex moved at most 2 cm and no edge stretched past 1.5 x its length unlifted."""
+    from cloth_usd.core.postprocess import mesh_edges
+    from cloth_usd.garments.source import read_garment_mesh
+
+    src = read_garment_mesh(DATA / "makehuman_top.obj")
+    mh = read_mhclo(DATA / "makehuman_top.mhclo")
+    plain, lifted = (fit_garment(src, "tshirt", np.zeros(10), body=body, mhclo=mh,
+                                 config=FitConfig(drape_frames=0, lift_rounds=rounds)) for rounds in (0, 2))
+    assert "skin_through" not in plain.report
+    assert lifted.report["skin_through"] < lifted.report["skin_through_before"], lifted.report
+    tri, _ = triangulate_polygons(plain.face_counts, plain.face_indices)
+    v_rest = shape_body(body, np.zeros(10))[0]
+    _, (before, after) = lift_off_skin(plain.points, tri, v_rest, body.faces, margin=0.002, rounds=0)
+    assert before == after == lifted.report["skin_through_before"]  # the count is of the unlifted garment
+    assert np.linalg.norm(lifted.points - plain.points, axis=1).max() < 0.02
+    e = mesh_edges(tri)
+    length = [np.linalg.norm(p[e[:, 1]] - p[e[:, 0]], axis=1) for p in (plain.points, lifted.points)]
+    assert (length[1] / length[0]).max() <= 1.5 + 1e-9
