@@ -6,6 +6,7 @@ command end to end."""
 from __future__ import annotations
 
 import importlib.util
+import json
 
 import numpy as np
 import pytest
@@ -297,7 +298,7 @@ def test_cli_refuses_in_one_line(tmp_path, capsys, text, message):
 
 
 @pytest.mark.skipif(not NEWTON, reason="newton is not installed")
-def test_cli_fits_and_drapes_a_small_obj(tmp_path, body):
+def test_cli_fits_and_drapes_a_small_obj(tmp_path, body, capsys):
     from pxr import Usd, UsdGeom
 
     rest, _, faces = _region_mesh(body, [16, 17])  # the upper arms' skin: two short sleeves
@@ -311,7 +312,11 @@ def test_cli_fits_and_drapes_a_small_obj(tmp_path, body):
     code = main(["garment", "fit", str(tmp_path / "sleeves.obj"), "-o", str(out), "--category", "tshirt",
                  "--drape-frames", "2"])
     assert code == 0
+    said = capsys.readouterr().out
+    assert "body vertices (" in said and "before the lift)" in said, said  # the skin through it, lifted
     stage = Usd.Stage.Open(str(out))
+    report = json.loads(stage.GetRootLayer().customLayerData["cloth_usd"]["garment_fit"])
+    assert 0 <= report["skin_through"] <= report["skin_through_before"], report
     mesh = UsdGeom.Mesh(stage.GetPrimAtPath("/Character/Tshirt"))
     pts = np.asarray(mesh.GetPointsAttr().Get())
     assert pts.shape == rest.shape
