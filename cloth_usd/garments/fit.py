@@ -433,8 +433,8 @@ def lift_off_skin(points: np.ndarray, tri: np.ndarray, body_vertices: np.ndarray
     (:class:`~cloth_usd.core.postprocess.TriangleLift`, ``rounds`` times; no edge stretched past
     :data:`~cloth_usd.core.postprocess.LIFT_STRETCH` times its length before). The push out of the body moves
     vertices, and a garment coarser than the body lets the body's bumps through between them: MakeHuman's
-    sports top, 911 vertices, had 20 body vertices more than 1 mm in front of its triangles at the chest and
-    the collars after the push, every tier then showing skin there.
+    sports top, 911 vertices, had 21 body vertices more than 1 mm in front of its triangles (the count returned
+    here) at the chest and the collars after the push, every tier then showing skin there.
 
     Returns:
         ``(points (N, 3), (before, after))``: the lifted garment and how many covered body vertices lie more
