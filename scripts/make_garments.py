@@ -45,11 +45,13 @@ def main() -> None:
     # The table holds every garment made into OUT so far, in preset order.
     rows = [json.loads((args.out / f"{e.replace('/', '_')}.json").read_text()) for e in every
             if (args.out / f"{e.replace('/', '_')}.json").exists()]
-    lines = ["| garment | panels | vertices | stretch p50 | stretch p99 | stretch max | time [s] |",
-             "|---|---|---|---|---|---|---|"]
+    lines = ["| garment | panels | vertices | stretch p50 | stretch p99 | stretch max | skin through at rest: "
+             "before the lift -> after | time [s] |",
+             "|---|---|---|---|---|---|---|---|"]
     for r in rows:
+        through = f"{r['skin_through_before']} -> {r['skin_through']}" if "skin_through" in r else "-"
         lines.append(f"| {r['category']} {r['preset']} | {r['panels']} | {r['vertices']} | {r['stretch_p50']:.3f} | "
-                     f"{r['stretch_p99']:.3f} | {r['stretch_max']:.3f} | {r['seconds']:.0f} |")
+                     f"{r['stretch_p99']:.3f} | {r['stretch_max']:.3f} | {through} | {r['seconds']:.0f} |")
     (args.out / "table.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

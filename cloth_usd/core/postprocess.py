@@ -582,9 +582,9 @@ class TriangleLift:
 
     Then the checks: a lifted vertex that the push would move (inside the body, measured as the push
     measures it: under the arm, a lift off the torso can go into the arm) goes back where it was, as
-    do both ends of an edge the lift stretched past :data:`LIFT_STRETCH` times its rest length; the edges
-    are then measured again with those back, until the lift stretches none (a vertex lifted beside one taken
-    back can leave their edge stretched).
+    do both ends of an edge the lift stretched past ``stretch`` (:data:`LIFT_STRETCH`) times its rest
+    length; the edges are then measured again with those back, until the lift stretches none (a vertex
+    lifted beside one taken back can leave their edge stretched).
 
     Args:
         faces: (M, 3) int the garment's triangles; rest_points: (N, 3) the rest garment [m].
@@ -594,17 +594,29 @@ class TriangleLift:
             edges between two covered vertices is lifted off too, its normal the average of theirs (the skin
             between the body's vertices, where a tight top shows most of its specks); None: the vertices alone.
         reach, margin: [m], see above.
+        stretch: the stretch check's bound, over an edge's rest length (:data:`LIFT_STRETCH`).
+        rest_lengths: (E,) [m] the rest lengths of the garment's edges (:func:`mesh_edges` of ``faces``, in its
+            order) that bound the stretch; None: their lengths in ``rest_points`` (a sewn garment's are its
+            pattern's).
     """
 
     def __init__(self, faces: np.ndarray, rest_points: np.ndarray, body_points: np.ndarray,
                  body_normals: np.ndarray, *, body_faces: np.ndarray | None = None, reach: float = LIFT_REACH,
-                 margin: float = LIFT_MARGIN) -> None:
+                 margin: float = LIFT_MARGIN, stretch: float = LIFT_STRETCH,
+                 rest_lengths: np.ndarray | None = None) -> None:
         self.num_vertices = len(rest_points)
         self.faces, self.ring = inner_triangles(faces, self.num_vertices)
         self.edges = mesh_edges(self.faces)
         self.all_edges = mesh_edges(faces)
         rest = np.asarray(rest_points, dtype=np.float64)
-        self.rest_lengths = vector_lengths(rest[self.all_edges[:, 1]] - rest[self.all_edges[:, 0]])
+        if rest_lengths is None:
+            rest_lengths = vector_lengths(rest[self.all_edges[:, 1]] - rest[self.all_edges[:, 0]])
+        elif np.shape(rest_lengths) != (len(self.all_edges),):
+            raise ArgumentError(f"the lift expected {len(self.all_edges)} rest lengths (the garment's edges), "
+                                f"got {np.shape(rest_lengths)}")
+        if not stretch >= 1.0:
+            raise ArgumentError(f"the lift's stretch bound must be >= 1, got {stretch}")
+        self.rest_lengths, self.stretch = np.asarray(rest_lengths, dtype=np.float64), float(stretch)
         self.cover = np.flatnonzero(covered_at_rest(rest_points, faces, body_points, body_normals))
         # the body's edges between two covered vertices: their midpoints are lifted off too
         covered = np.zeros(len(body_points), dtype=bool)
@@ -671,7 +683,7 @@ class TriangleLift:
         # an edge at a lifted vertex can): such an edge's lifted ends go back, and the edges are measured again
         # with them back (a lift kept beside one taken back can leave their edge stretched), until none is
         at_lifted = np.isin(self.all_edges, row).any(axis=1)
-        e, longest = self.all_edges[at_lifted], LIFT_STRETCH * self.rest_lengths[at_lifted]
+        e, longest = self.all_edges[at_lifted], self.stretch * self.rest_lengths[at_lifted]
         before, original = vector_lengths(p[:, e[:, 1]] - p[:, e[:, 0]]), p[frame, row]
         p[frame[keep], row[keep]] = q[frame[keep], slot[keep]]
         while True:

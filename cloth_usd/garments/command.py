@@ -135,18 +135,24 @@ def _fit(args: argparse.Namespace) -> int:
     faces = np.split(fitted.face_indices, np.cumsum(fitted.face_counts)[:-1])
     path = _write(args, body, betas, points=fitted.points, faces=faces, st=fitted.uv, st_indices=fitted.uv_indices,
                   key="garment_fit", report=report)
-    through = (f"skin through it at {report['skin_through']} body vertices ({report['skin_through_before']} before "
-               "the lift), " if "skin_through" in report else "")
     sys.stdout.write(f"wrote {path}: {args.category} fitted by {report['method']} "
                      f"({report['units_m']:g} m per unit, {report['up_axis']} up, "
                      f"{'turned %g deg, ' % report['turned_deg'] if report.get('turned_deg') else ''}"
                      f"arm pose {report['arm_pose']:g}), "
                      f"{report['vertices']} vertices, median {report['median_distance_mm']:.1f} mm from the body, "
                      f"{100 * report['inside_fraction']:.1f}% inside, "
-                     f"{through}"
+                     f"{_through(report)}"
                      f"{'%d piece(s) undraped (they fell off the body), ' % report['pieces_undraped'] if report.get('pieces_undraped') else ''}"
                      f"{report['seconds']:.0f} s\n")
     return 0
+
+
+def _through(report: dict) -> str:
+    """The summary's words on the skin through the garment at rest, before and after its lift off it."""
+    if "skin_through" not in report:
+        return ""
+    return (f"skin through it at {report['skin_through']} body vertices ({report['skin_through_before']} before "
+            "the lift), ")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -173,5 +179,5 @@ def run(args: argparse.Namespace) -> int:
                   key="garment", report=report)
     sys.stdout.write(f"wrote {path}: {args.category} {args.preset or ''} {report['vertices']} vertices, "
                      f"{report['panels']} panels, edge stretch vs pattern p99 {report['stretch_p99']:.3f} "
-                     f"(max {report['stretch_max']:.3f}), {report['seconds']:.0f} s\n")
+                     f"(max {report['stretch_max']:.3f}), {_through(report)}{report['seconds']:.0f} s\n")
     return 0

@@ -19,7 +19,7 @@
    drape left inside the full-resolution body (its collider is a decimated body) is moved
    out again, 2 mm from the skin. A piece the body does not hold up (it falls in the
    drape) keeps its undraped place.
-4. **Lifted off the skin between its vertices** (:func:`lift_off_skin`): where the body
+4. **Lifted off the skin between its vertices** (:func:`~.sew.lift_off_skin`): where the body
    bulges in front of a triangle whose corners are out of it (a garment coarser than the
    body, at the chest and the collars), the triangle is moved off it, 2 mm too.
 
@@ -47,14 +47,13 @@ from ..core.features import vertex_normals
 from ..core.heading import yaw_matrices
 from ..core.mesh import edge_components
 from ..core.plausibility import has_legs
-from ..core.postprocess import TriangleLift
 from ..core.rotations import axis_angle_to_matrix
 from .mhclo import Mhclo, bind_mhclo, load_hm08_map, mhclo_applies
-from .sew import push_out
+from .sew import lift_off_skin, push_out
 from .source import GarmentFitError, SourceMesh
 
-__all__ = ["FitConfig", "FittedGarment", "fit_garment", "drape", "lift_off_skin", "mhclo_beside",
-           "triangulate_polygons", "UNIT_CANDIDATES"]
+__all__ = ["FitConfig", "FittedGarment", "fit_garment", "drape", "mhclo_beside", "triangulate_polygons",
+           "UNIT_CANDIDATES"]
 
 log = logging.getLogger(__name__)
 
@@ -113,7 +112,7 @@ class FitConfig:
     it is moved out to this distance along the surface normal."""
     lift_rounds: int = 2
     """Rounds of the lift of the garment's triangles off the skin between its vertices, to
-    :attr:`final_clearance` behind them (:func:`lift_off_skin`); 0: none."""
+    :attr:`final_clearance` behind them (:func:`~cloth_usd.garments.sew.lift_off_skin`); 0: none."""
     max_median_distance: float = 0.12
     """A garment whose median vertex lies further [m] from the body after alignment is refused."""
 
@@ -423,33 +422,6 @@ def fit_garment(src: SourceMesh, category: str, betas: np.ndarray, *, body: Body
                   seconds=round(time.perf_counter() - began, 1))
     return FittedGarment(points=rest, face_counts=counts, face_indices=indices, uv=src.uv, uv_indices=uv_indices,
                          report=report)
-
-
-def lift_off_skin(points: np.ndarray, tri: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray, *,
-                  margin: float, rounds: int = 2) -> tuple[np.ndarray, tuple[int, int]]:
-    """The garment (N, 3) at rest on the body at rest (``body_vertices`` (V, 3) [m], ``body_faces``) with its
-    triangles (``tri``) lifted off the skin that lies in front of them, or less than ``margin`` [m] behind,
-    between their corners: the body's vertices and the midpoints of its edges that the garment covers
-    (:class:`~cloth_usd.core.postprocess.TriangleLift`, ``rounds`` times; no edge stretched past
-    :data:`~cloth_usd.core.postprocess.LIFT_STRETCH` times its length before). The push out of the body moves
-    vertices, and a garment coarser than the body lets the body's bumps through between them: MakeHuman's
-    sports top, 911 vertices, had 21 body vertices more than 1 mm in front of its triangles (the count returned
-    here) at the chest and the collars after the push, every tier then showing skin there.
-
-    Returns:
-        ``(points (N, 3), (before, after))``: the lifted garment and how many covered body vertices lie more
-        than :data:`~cloth_usd.core.postprocess.THROUGH_DEPTH` in front of its triangles before and after.
-    """
-    normals = vertex_normals(body_vertices, body_faces)
-    lift = TriangleLift(tri, points, body_vertices, normals, body_faces=body_faces, margin=margin)
-    frame, every = (body_vertices[None], normals[None]), np.arange(len(body_vertices))
-    lifted = np.asarray(points, dtype=np.float64)[None]
-    before = int(lift.bared(lifted, *frame, every)[0][0])
-    for _ in range(rounds):
-        lifted, moved = lift(lifted, *frame, body_faces, every)
-        if not moved[0]:
-            break
-    return lifted[0], (before, int(lift.bared(lifted, *frame, every)[0][0]))
 
 
 def _depth(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray,

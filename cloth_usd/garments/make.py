@@ -64,7 +64,9 @@ class MadeGarment:
                 "stretch_p50": round(float(np.percentile(s, 50)), 4),
                 "stretch_p99": round(float(np.percentile(s, 99)), 4), "stretch_max": round(float(s.max()), 4),
                 "compression_p1": round(float(np.percentile(s, 1)), 4),
-                "seam_gap_mm": round(self.sewn.stitched_gap * 1e3, 2), "seconds": round(self.seconds, 1)}
+                "seam_gap_mm": round(self.sewn.stitched_gap * 1e3, 2), "seconds": round(self.seconds, 1),
+                **({} if self.sewn.skin_through is None else
+                   {"skin_through_before": self.sewn.skin_through[0], "skin_through": self.sewn.skin_through[1]})}
 
 
 def _area(ring: np.ndarray) -> float:

@@ -30,11 +30,13 @@ import numpy as np
 
 from ..core.body import BodyModel, shape_body
 from ..core.features import vertex_normals
+from ..core.postprocess import LIFT_MARGIN, LIFT_STRETCH, TriangleLift
 from ..datagen.simulate import SimConfig, SimulationError, _import_engine, make_collider, resolve_device
 from ..errors import ArgumentError
 from .pattern import PatternMesh
 
-__all__ = ["SewConfig", "SewnGarment", "merge_seams", "pattern_edge_lengths", "conform_placement", "sew"]
+__all__ = ["SewConfig", "SewnGarment", "merge_seams", "pattern_edge_lengths", "conform_placement", "sew",
+           "lift_off_skin", "push_out"]
 
 log = logging.getLogger(__name__)
 
@@ -68,6 +70,14 @@ class SewConfig:
     """Seam spring stiffness [N/m] (rest length 0)."""
     seam_damping: float = 0.05
     """Seam spring damping [N s/m]."""
+    lift_rounds: int = 2
+    """Rounds of the lift of the draped garment's triangles off the skin between its vertices
+    (:func:`lift_off_skin`, to :attr:`lift_margin` behind them); 0: none."""
+    lift_margin: float = LIFT_MARGIN
+    """How far [m] the lift puts the skin behind the garment's triangles (the detail tier's own)."""
+    lift_stretch: float = 1.05
+    """The lift stretches no edge past this times its length in the pattern (further than the drape did):
+    bounded at 1.5 x its draped length instead, it took the 400-vertex shorts' p99 to 1.065."""
     sim: SimConfig = field(default_factory=lambda: _SEW_SIM)
     """Material, contact and solver (its ``drape_frames`` is unused)."""
 
@@ -90,6 +100,9 @@ class SewnGarment:
     stitched_gap: float
     """Largest distance [m] between a seam's two sides when the stitch ended."""
     seconds: float
+    skin_through: tuple[int, int] | None = None
+    """The body vertices it covers more than 1 mm in front of its triangles, before and after the lift
+    (:func:`lift_off_skin`; None: not lifted)."""
 
 
 def merge_seams(num_vertices: int, seams: np.ndarray) -> np.ndarray:
@@ -280,6 +293,36 @@ def push_out(points: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarr
     return out
 
 
+def lift_off_skin(points: np.ndarray, tri: np.ndarray, body_vertices: np.ndarray, body_faces: np.ndarray, *,
+                  margin: float, rounds: int = 2, stretch: float = LIFT_STRETCH,
+                  rest_lengths: np.ndarray | None = None) -> tuple[np.ndarray, tuple[int, int]]:
+    """The garment (N, 3) at rest on the body at rest (``body_vertices`` (V, 3) [m], ``body_faces``) with its
+    triangles (``tri``) lifted off the skin that lies in front of them, or less than ``margin`` [m] behind,
+    between their corners: the body's vertices and the midpoints of its edges that the garment covers
+    (:class:`~cloth_usd.core.postprocess.TriangleLift`, ``rounds`` times; no edge stretched past ``stretch``
+    times its ``rest_lengths``, by default its length before, further than it was). The push out of the body
+    and the drape on a decimated body hold the vertices off it, and a garment coarser than the body lets the
+    body's bumps through between them: MakeHuman's sports top, 911 vertices, fitted, had 21 body vertices more
+    than 1 mm in front of its triangles (the count returned here) at the chest and the collars, every tier then
+    showing skin there.
+
+    Returns:
+        ``(points (N, 3), (before, after))``: the lifted garment and how many covered body vertices lie more
+        than :data:`~cloth_usd.core.postprocess.THROUGH_DEPTH` in front of its triangles before and after.
+    """
+    normals = vertex_normals(body_vertices, body_faces)
+    lift = TriangleLift(tri, points, body_vertices, normals, body_faces=body_faces, margin=margin, stretch=stretch,
+                        rest_lengths=rest_lengths)
+    frame, every = (body_vertices[None], normals[None]), np.arange(len(body_vertices))
+    lifted = np.asarray(points, dtype=np.float64)[None]
+    before = int(lift.bared(lifted, *frame, every)[0][0])
+    for _ in range(rounds):
+        lifted, moved = lift(lifted, *frame, body_faces, every)
+        if not moved[0]:
+            break
+    return lifted[0], (before, int(lift.bared(lifted, *frame, every)[0][0]))
+
+
 def quiet_warp() -> None:
     """No banner or module-load lines from warp on a command's stdout (read when newton
     initialises warp): ``config.quiet`` in older warp, ``config.log_level`` in newer (1.19
@@ -352,12 +395,17 @@ def sew(body: BodyModel, betas: np.ndarray, mesh: PatternMesh, config: SewConfig
     if config.settle_frames:
         draped = _simulate(newton, wp, device, draped, faces, frames=config.settle_frames, gravity=cfg.gravity,
                            rest=rest, held=held, **converged)
+    through = None
+    if config.lift_rounds > 0:  # the full body's bumps between the vertices (the collider is the body decimated)
+        draped, through = lift_off_skin(draped, faces, np.asarray(v_rest, dtype=np.float64), body.faces,
+                                        margin=config.lift_margin, rounds=config.lift_rounds,
+                                        stretch=config.lift_stretch, rest_lengths=lengths)
     stretch = np.linalg.norm(draped[edges[:, 0]] - draped[edges[:, 1]], axis=1) / np.maximum(lengths, 1e-12)
     seconds = time.perf_counter() - began
     log.info("sewn and draped in %.1f s: %d vertices, edge stretch p99 %.3f", seconds, count,
              float(np.percentile(stretch, 99)))
     return SewnGarment(points=draped, faces=faces, corner_vertex=corner, vertex_of=vertex_of, stretch=stretch,
-                       stitched_gap=gap, seconds=seconds)
+                       stitched_gap=gap, seconds=seconds, skin_through=through)
 
 
 def with_sim(config: SewConfig, **changes) -> SewConfig:

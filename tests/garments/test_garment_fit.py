@@ -13,7 +13,9 @@ import pytest
 
 from cloth_usd.cli import main
 from cloth_usd.core.body import lbs, load_body_model, shape_body
-from cloth_usd.garments.fit import FitConfig, fit_garment, lift_off_skin, triangulate_polygons
+from cloth_usd.garments.fit import FitConfig, fit_garment, triangulate_polygons
+from cloth_usd.errors import ArgumentError
+from cloth_usd.garments.sew import lift_off_skin
 from cloth_usd.garments.mhclo import Mhclo, bind_mhclo, load_hm08_map, read_mhclo
 from cloth_usd.garments.source import GarmentFitError, SourceMesh, read_glb, read_obj
 
@@ -595,6 +597,12 @@ def test_lift_off_skin_lifts_a_coarse_garment_off_a_bump_between_its_vertices():
     moved = np.linalg.norm(lifted - cloth, axis=1)
     far = np.linalg.norm(cloth[:, :2] - [0.013, 0.007], axis=1) > 0.08
     assert moved[far].max() < 1e-6 and moved.max() > 0.003
+    # bounded at the edges' lengths (a sewn garment's bound is its pattern's): a lift lengthens every edge it
+    # moves, so none is kept
+    held, (before, after) = lift_off_skin(cloth, cloth_faces, skin, skin_faces, margin=0.002, stretch=1.0)
+    assert after == before > 0 and np.abs(held - cloth).max() < 1e-9
+    with pytest.raises(ArgumentError, match="rest lengths"):
+        lift_off_skin(cloth, cloth_faces, skin, skin_faces, margin=0.002, rest_lengths=np.ones(3))
 
 
 def test_fit_lifts_a_makehuman_top_off_the_skin_between_its_vertices(body):
