@@ -399,7 +399,7 @@ def sew(body: BodyModel, betas: np.ndarray, mesh: PatternMesh, config: SewConfig
     if config.lift_rounds > 0:  # the full body's bumps between the vertices (the collider is the body decimated)
         draped, through = lift_off_skin(draped, faces, np.asarray(v_rest, dtype=np.float64), body.faces,
                                         margin=config.lift_margin, rounds=config.lift_rounds,
-                                        stretch=config.lift_stretch, rest_lengths=lengths)
+                                        stretch=config.lift_stretch, rest_lengths=lengths)  # edges: mesh_edges(faces)
     stretch = np.linalg.norm(draped[edges[:, 0]] - draped[edges[:, 1]], axis=1) / np.maximum(lengths, 1e-12)
     seconds = time.perf_counter() - began
     log.info("sewn and draped in %.1f s: %d vertices, edge stretch p99 %.3f", seconds, count,
