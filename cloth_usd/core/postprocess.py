@@ -679,7 +679,7 @@ class TriangleLift:
         q[frame, slot] = p[frame, row] + move
         pushed = push_out_of_surface(q, b, n, body_faces, cand, margin=0.0, rings=rings, trees=trees)[0]
         keep = (pushed[frame, slot] == q[frame, slot]).all(axis=1)
-        # nor may it stretch an edge past LIFT_STRETCH times its rest length, and further than it was (only
+        # nor may it stretch an edge past ``stretch`` times its rest length, and further than it was (only
         # an edge at a lifted vertex can): such an edge's lifted ends go back, and the edges are measured again
         # with them back (a lift kept beside one taken back can leave their edge stretched), until none is
         at_lifted = np.isin(self.all_edges, row).any(axis=1)
@@ -771,7 +771,7 @@ class TriangleLift:
     def _moves(self, g: np.ndarray, bp: np.ndarray, bn: np.ndarray,
                edge_end: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """One frame: ``(vertices (L,) int64, moves (L, 3) [m])`` of the garment ``g`` (N, 3) off the
-        covered body vertices ``bp`` (K', 3) with unit normals ``bn`` (K', 3)."""
+        covered body points ``bp`` (K', 3) with unit normals ``bn`` (K', 3) (``edge_end``: as :meth:`_front`)."""
         rows, ahead, bary, corners = self._front(g, bp, bn, -self.margin, edge_end)
         if not rows.size:
             return np.zeros(0, dtype=np.int64), np.zeros((0, 3))
