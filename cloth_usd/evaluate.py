@@ -159,8 +159,9 @@ def garment_reads(bundle, clips) -> str:
     return "authored" if all(c.authored_points is not None for c in clips) else "draped"
 
 
-def learned_garment(bundle, body: BodyModel, clip, reads: str = "draped"):
-    """A test sequence's garment on ``bundle`` (a :class:`~cloth_usd.runtime.garment.LearnedGarment`),
+def learned_garment(bundle, body: BodyModel, clip, reads: str = "draped", **settings):
+    """A test sequence's garment on ``bundle`` (a :class:`~cloth_usd.runtime.garment.LearnedGarment`,
+    made with ``settings``: its ``smoothing``, for instance),
     reading its draped rest or, with ``reads="authored"`` (:func:`garment_reads`) and a data set
     that keeps it, the garment before the drape. (A garment's own model read from another rest
     than the one it learned from would, for instance, drape an already draped garment again.)
@@ -168,8 +169,9 @@ def learned_garment(bundle, body: BodyModel, clip, reads: str = "draped"):
     from .runtime.garment import LearnedGarment
 
     if reads == "authored" and clip.authored_points is not None:
-        return LearnedGarment(bundle, body, clip.pair.betas, clip.authored_points, clip.pair.faces)
-    return LearnedGarment(bundle, body, clip.pair.betas, clip.rest_points, clip.pair.faces, binding=clip.pair.binding)
+        return LearnedGarment(bundle, body, clip.pair.betas, clip.authored_points, clip.pair.faces, **settings)
+    return LearnedGarment(bundle, body, clip.pair.betas, clip.rest_points, clip.pair.faces, binding=clip.pair.binding,
+                          **settings)
 
 
 def _ablation_label(run) -> str:

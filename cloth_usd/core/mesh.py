@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 from scipy import sparse
 
-__all__ = ["laplacian_smooth", "vector_lengths", "cross", "open_edges", "boundary_vertices", "edge_components"]
+__all__ = ["laplacian_smooth", "neighbour_mean", "TAUBIN_LAMBDA", "TAUBIN_MU", "vector_lengths",
+           "cross", "open_edges", "boundary_vertices", "edge_components"]
 
 
 def vector_lengths(v: np.ndarray) -> np.ndarray:
@@ -46,8 +47,10 @@ def boundary_vertices(faces: np.ndarray) -> np.ndarray:
     return np.unique(open_edges(faces))
 
 
-def _uniform_laplacian(faces: np.ndarray, n: int) -> sparse.csr_matrix:
-    """(N, N) row-normalised adjacency: ``A @ x`` is each vertex's neighbour mean."""
+def neighbour_mean(faces: np.ndarray, n: int) -> sparse.csr_matrix:
+    """(N, N) row-normalised adjacency of ``n`` vertices joined by triangles ``faces`` (M, 3): ``A @ x`` is each
+    vertex's neighbour mean (what :func:`laplacian_smooth` steps towards)."""
+    faces = np.asarray(faces, dtype=np.int64)
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     e = np.unique(np.sort(e, axis=1), axis=0)
     rows = np.concatenate([e[:, 0], e[:, 1]])
@@ -57,8 +60,13 @@ def _uniform_laplacian(faces: np.ndarray, n: int) -> sparse.csr_matrix:
     return sparse.diags(1.0 / np.maximum(deg, 1.0)) @ adj
 
 
+#: Taubin's lambda|mu steps (:func:`laplacian_smooth`): the coarse ground truth's smoothing and the one over a
+#: garment's own model's displacement (:data:`~cloth_usd.core.pipeline.OWN_SMOOTHING`).
+TAUBIN_LAMBDA, TAUBIN_MU = 0.5, -0.53
+
+
 def laplacian_smooth(positions: np.ndarray, faces: np.ndarray, *, iterations: int = 10,
-                     lam: float = 0.5, mu: float = 0.0) -> np.ndarray:
+                     lam: float = 0.5, mu: float = 0.0, mean: sparse.csr_matrix | None = None) -> np.ndarray:
     """Uniform Laplacian smoothing, ``x <- x + lam (mean(neighbours) - x)``, per frame.
 
     With ``mu < 0`` every pass is followed by a second one of step ``mu`` (Taubin's
@@ -68,6 +76,8 @@ def laplacian_smooth(positions: np.ndarray, faces: np.ndarray, *, iterations: in
         positions: (T, N, 3) or (N, 3) vertices [m].
         faces: (M, 3) int triangles.
         mu: the step of the inflating pass (0: none, plain Laplacian smoothing).
+        mean: :func:`neighbour_mean` of ``faces``, when the caller made it already (a frame's smoothing costs
+            less than making it).
     Returns:
         The smoothed vertices, same shape, float32 when the input is float32.
     """
@@ -75,7 +85,7 @@ def laplacian_smooth(positions: np.ndarray, faces: np.ndarray, *, iterations: in
     single = pos.ndim == 2
     x = (pos[None] if single else pos).astype(np.float64)
     num_t, n = x.shape[:2]
-    avg = _uniform_laplacian(np.asarray(faces, dtype=np.int64), n)
+    avg = neighbour_mean(faces, n) if mean is None else mean
     flat = x.transpose(1, 0, 2).reshape(n, num_t * 3)  # all frames in one sparse product
     for _ in range(iterations):
         flat = flat + lam * (avg @ flat - flat)

@@ -32,6 +32,7 @@ from ..core.features import ATTRIBUTE_FEATURES
 from ..core.files import file_sha256
 from ..core.fit import FitModel
 from ..core.heading import Heading, heading_frame
+from ..core.mesh import TAUBIN_LAMBDA, TAUBIN_MU, laplacian_smooth
 from ..core.pipeline import (
     CoarseBase,
     CoarseFeatures,
@@ -263,15 +264,14 @@ class CoarseTarget(str, enum.Enum):
     wrinkles but keeps the garment's size (3.2 mm from the simulation on the same sequences)."""
 
 
-#: The passes and steps of the :attr:`CoarseTarget.TAUBIN` target.
-TAUBIN_PASSES, TAUBIN_LAMBDA, TAUBIN_MU = 10, 0.5, -0.53
+#: The passes of the :attr:`CoarseTarget.TAUBIN` target (its steps: Taubin's,
+#: :data:`~cloth_usd.core.mesh.TAUBIN_LAMBDA` and ``TAUBIN_MU``).
+TAUBIN_PASSES = 10
 
 
 def taubin_smooth(positions: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """A simulated garment (T, N, 3) with its wrinkles smoothed out as the :attr:`CoarseTarget.TAUBIN`
     target is (the garment's size kept), in the dtype it came in."""
-    from ..core.mesh import laplacian_smooth
-
     return laplacian_smooth(positions, faces, iterations=TAUBIN_PASSES, lam=TAUBIN_LAMBDA, mu=TAUBIN_MU)
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from ..core.body import BodyModel
 from ..core.features import vertex_normals
 from ..core.graph import MeshGraph
-from ..core.pipeline import GarmentPair, prepare_pair, run_tiers
+from ..core.pipeline import OWN_SMOOTHING, GarmentPair, prepare_pair, run_tiers
 from ..core.postprocess import STRAIN_LIMIT, StrainLimiter, TriangleLift, check_strain_limit, garment_margin
 from ..core.scene import Tier
 from ..core.skinning import SkinBinding
@@ -65,11 +65,15 @@ class LearnedGarment:
         lift: the detail tier's post-process ends with a lift of the garment's triangles off the body
             vertices in front of them (:class:`~cloth_usd.core.postprocess.TriangleLift`); False: it
             does not.
+        smoothing: with a garment's own bundle, the Taubin passes over its model's displacement
+            (:data:`~cloth_usd.core.pipeline.OWN_SMOOTHING`; 0: none). A category bundle's graph models
+            are not smoothed.
     """
 
     def __init__(self, bundle: ModelBundle, body: BodyModel, betas: np.ndarray, rest_points: np.ndarray,
                  faces: np.ndarray, *, binding: SkinBinding | None = None,
-                 margin: float | None = None, strain_limit: float | None = STRAIN_LIMIT, lift: bool = True) -> None:
+                 margin: float | None = None, strain_limit: float | None = STRAIN_LIMIT, lift: bool = True,
+                 smoothing: int = OWN_SMOOTHING) -> None:
         self.bundle = bundle
         self.body = body
         self.margin = float(margin) if margin is not None else garment_margin(rest_points, faces)
@@ -77,6 +81,9 @@ class LearnedGarment:
             check_strain_limit(strain_limit)
         self._limit = (np.asarray(rest_points, dtype=np.float64), np.asarray(faces), strain_limit)
         self._lift = lift
+        if not (isinstance(smoothing, int) and smoothing >= 0):
+            raise ArgumentError(f"smoothing must be a whole number of passes >= 0, got {smoothing!r}")
+        self.smoothing = smoothing
         if bundle.garment is not None and not bundle.garment.serves(len(rest_points), faces):
             raise BundleError(f"{bundle.path}: bundle '{bundle.name}' was trained for one garment of "
                               f"{bundle.garment.vertices} vertices, and this garment ({len(rest_points)} vertices) is "
@@ -178,7 +185,7 @@ class LearnedGarment:
 
             points, moved = run_garment_model(self.body, self.pair, poses, transl, run_model, batch_size=batch_size,
                                               margin=self.margin, postprocess=postprocess, limiter=limiter,
-                                              lift=lift)
+                                              lift=lift, smoothing=self.smoothing)
             return LearnedFrames(points=points, moved=moved)
         coarse = self.bundle.session(Tier.COARSE)
         detail = self.bundle.session(Tier.DETAIL) if tier is Tier.DETAIL else None

@@ -310,3 +310,40 @@ def test_the_post_process_solves_the_limit_again_where_it_bared_the_skin(monkeyp
     first, got, _, before, _ = post(0.65)  # nothing bared past the tolerance: as the limit, push and lift left it
     assert (before <= BARED_TOLERANCE).all()
     np.testing.assert_array_equal(got, first)
+
+
+def test_a_garment_models_grain_is_smoothed_and_its_folds_kept():
+    """run_garment_model smooths the part of the own model's displacement along the rest garment's normals
+    before skinning it: a grain from vertex to vertex goes, a broad fold (a displacement that varies over the
+    garment, not from vertex to vertex) keeps its depth, and the displacement across the normals (the
+    membrane's) stays as the model gave it."""
+    from cloth_usd.core.features import vertex_normals
+    from cloth_usd.core.pipeline import OWN_SMOOTHING, run_garment_model
+    from cloth_usd.core.skinning import skin_garment
+
+    body, rest, faces, pair, _, skinned = _walking_shirt()
+    poses, transl = walk_cycle(3)
+    normals = vertex_normals(rest, faces)
+    rng = np.random.default_rng(0)
+    grain = 0.004 * rng.choice([-1.0, 1.0], size=(len(rest), 1)) * normals
+    fold = 0.02 * np.sin(rest[:, 1:2] * 12.0) * normals  # a 50 cm wave down the shirt
+    across = np.cross(normals, rng.normal(size=(len(rest), 3))) * 0.003  # in the membrane, at random
+
+    def model(canonical_poses):
+        return np.broadcast_to(fold + grain + across, (len(canonical_poses), len(rest), 3))
+
+    def unposed(smoothing):  # the displacement as skinned: the garment less the skinned garment, at rest
+        got = run_garment_model(body, pair, np.zeros((1, 72)), np.zeros((1, 3)), model, postprocess=False,
+                                smoothing=smoothing)[0][0]
+        return got - skin_garment(pair.binding, np.zeros((1, 72)), np.zeros((1, 3)), body.parents)[0]
+
+    np.testing.assert_allclose(unposed(0), fold + grain + across, atol=1e-9)  # none: the model's own displacement
+    assert OWN_SMOOTHING > 0
+    smooth = unposed(OWN_SMOOTHING)
+    np.testing.assert_allclose(smooth - np.einsum("nc,nc->n", smooth, normals)[:, None] * normals, across,
+                               atol=1e-9)  # the membrane's part as it was
+    height, wave = np.einsum("nc,nc->n", smooth, normals), np.einsum("nc,nc->n", fold, normals)
+    assert np.abs(height - wave).mean() < 0.5 * np.abs(np.einsum("nc,nc->n", grain, normals)).mean()  # 0.41 x: 4 passes
+    assert np.polyfit(wave, height, 1)[0] > 0.9  # the fold keeps its depth
+    moved = run_garment_model(body, pair, poses, transl, model, postprocess=False)[0]
+    assert np.isfinite(moved).all() and moved.shape == skinned.shape

@@ -10,6 +10,8 @@ import pytest
 
 from cloth_usd.core.body import load_body_model
 from cloth_usd.core.garment_inputs import faces_sha256, skin_displaced, skin_parts
+from cloth_usd.core.features import vertex_normals
+from cloth_usd.core.pipeline import OWN_SMOOTHING, smooth_along_normals
 from cloth_usd.core.skinning import bind_garment, skin_garment
 from cloth_usd.datagen import TShirtParams, make_tshirt
 from cloth_usd.datagen.factory import OWN_BODY, save_own_garment
@@ -227,7 +229,7 @@ def test_export_writes_a_bundle_bound_to_the_garment_that_animates_it(own, tmp_p
     parity = bundle.manifest["metrics"]["export_parity"]
     assert max(parity.values()) <= 1e-5
     poses, transl = walk_cycle(4)
-    garment = LearnedGarment(bundle, body, betas, verts, faces)
+    garment = LearnedGarment(bundle, body, betas, verts, faces, smoothing=0)  # the models' displacement as they give it
     skinned = skin_garment(garment.binding, poses, transl, body.parents)
     garment.evaluate("coarse", poses, transl)
     assert "limiter" not in vars(garment)  # the coarse tier never factors the detail tier's strain limiter
@@ -250,6 +252,13 @@ def test_export_writes_a_bundle_bound_to_the_garment_that_animates_it(own, tmp_p
         args = torch.from_numpy(inputs["pose"]).double(), torch.from_numpy(inputs["betas"]).double()
         d = (nets[0](*args) + nets[1](*args)).numpy()
     np.testing.assert_allclose(detail, skin_displaced(garment.binding, poses, transl, body.parents, d), atol=1e-5)
+    # a bake smooths its part along the rest garment's normals first (OWN_SMOOTHING Taubin passes)
+    baked = LearnedGarment(bundle, body, betas, verts, faces).evaluate("detail", poses, transl,
+                                                                     postprocess=False).points
+    smooth = smooth_along_normals(d, vertex_normals(garment.binding.rest_points, faces), faces, OWN_SMOOTHING)
+    np.testing.assert_allclose(baked, skin_displaced(garment.binding, poses, transl, body.parents, smooth), atol=1e-5)
+    with pytest.raises(ArgumentError, match="smoothing must be a whole number of passes >= 0, got -1"):
+        LearnedGarment(bundle, body, betas, verts, faces, smoothing=-1)
     # another garment's triangles are refused in one line naming the bundle
     with pytest.raises(BundleError, match="mine") as err:  # the same points, one triangle fewer
         LearnedGarment(bundle, body, betas, verts, faces[1:])
