@@ -65,9 +65,9 @@ class LearnedGarment:
         lift: the detail tier's post-process ends with a lift of the garment's triangles off the body
             vertices in front of them (:class:`~cloth_usd.core.postprocess.TriangleLift`); False: it
             does not.
-        smoothing: with a garment's own bundle, the Taubin passes over its model's displacement
-            (:data:`~cloth_usd.core.pipeline.OWN_SMOOTHING`; 0: none). A category bundle's graph models
-            are not smoothed.
+        smoothing: with a garment's own bundle, the Taubin passes over the part of its model's
+            displacement along the rest garment's normals (:data:`~cloth_usd.core.pipeline.OWN_SMOOTHING`;
+            0: none). A category bundle's graph models are not smoothed.
     """
 
     def __init__(self, bundle: ModelBundle, body: BodyModel, betas: np.ndarray, rest_points: np.ndarray,
