@@ -23,7 +23,7 @@ Run: python bench/bench_own_smoothing.py --data TESTSET --bundle OWN_BUNDLE --pa
 from __future__ import annotations
 
 import argparse
-import json
+import sys
 import time
 from pathlib import Path
 
@@ -36,6 +36,9 @@ from cloth_usd.core.pipeline import smooth_along_normals
 from cloth_usd.evaluate import _SPLIT_TITLES, garment_reads, learned_garment
 from cloth_usd.nn.data import load_dataset
 from cloth_usd.runtime.bundle import load_bundle
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_strain_limit import split_means, write_report  # noqa: E402  (its per-split means and files, alike)
 
 TIERS = ("coarse", "detail")
 
@@ -89,9 +92,7 @@ def main(argv=None) -> int:
     rows = []
     for k in args.passes:
         for t in TIERS:
-            per = {s: 1e3 * float(np.concatenate(v).mean()) for s, v in errors[k, t].items() if v}
-            per["all"] = 1e3 * float(np.concatenate([np.concatenate(v) for v in errors[k, t].values() if v]).mean())
-            rows.append({"passes": k, "tier": t, "mm": per,
+            rows.append({"passes": k, "tier": t, "mm": split_means(errors[k, t]),
                          "grain_mm": 1e3 * float(np.concatenate(grains[k, t]).mean()),
                          "ms_per_frame": 1e3 * seconds[k] / max(frames, 1)})
     ref = {r["tier"]: r["mm"]["all"] for r in rows if r["passes"] == args.passes[0]}
@@ -105,13 +106,8 @@ def main(argv=None) -> int:
     for r in rows:
         lines.append(f"| {r['passes']} | {r['tier']} | " + " | ".join(f"{r['mm'][c]:.2f}" for c in columns)
                      + f" | {r['mm']['all'] / ref[r['tier']]:.3f} | {r['grain_mm']:.2f} | {r['ms_per_frame']:.2f} |")
-    text = "\n".join(lines) + "\n"
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "own_smoothing.md").write_text(text)
-    (out / "own_smoothing.json").write_text(json.dumps({"bundle": bundle.name, "frames": frames,
-                                                         "newton_grain_mm": newton, "rows": rows}, indent=1))
-    print(text)
+    write_report(args.out, "own_smoothing", "\n".join(lines) + "\n",
+                 {"bundle": bundle.name, "frames": frames, "newton_grain_mm": newton, "rows": rows})
     return 0
 
 

@@ -34,6 +34,24 @@ from cloth_usd.nn.data import load_dataset
 from cloth_usd.runtime.bundle import load_bundle
 
 
+def split_means(errors: dict) -> dict:
+    """``{split title: mean [mm]}`` of per-frame mean vertex errors [m] (``errors``: split title -> the (T,)
+    arrays of its sequences, as ``cloth-usd evaluate`` splits them; an empty split left out), and ``"all"``
+    over every frame."""
+    per = {s: 1e3 * float(np.concatenate(v).mean()) for s, v in errors.items() if v}
+    per["all"] = 1e3 * float(np.concatenate([np.concatenate(v) for v in errors.values() if v]).mean())
+    return per
+
+
+def write_report(out: str | Path, stem: str, text: str, payload: dict) -> None:
+    """Write ``OUT/STEM.md`` (``text``) and ``OUT/STEM.json`` (``payload``), and print ``text``."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / f"{stem}.md").write_text(text)
+    (out / f"{stem}.json").write_text(json.dumps(payload, indent=1))
+    print(text)
+
+
 def parse_setting(text: str) -> tuple[float, int, float] | None:
     """``LIMIT/ROUNDS[/ANCHOR]`` as ``(limit, rounds, anchor)``; ``none``: None (no limiter)."""
     if text == "none":
@@ -85,9 +103,8 @@ def main(argv=None) -> int:
                                          for name, _ in settings), flush=True)
     rows = []
     for name, _ in settings:
-        per = {s: 1e3 * float(np.concatenate(v).mean()) for s, v in errors[name].items() if v}
-        per["all"] = 1e3 * float(np.concatenate([np.concatenate(v) for v in errors[name].values() if v]).mean())
-        rows.append({"setting": name, "mm": per, "ms_per_frame": 1e3 * seconds[name] / max(frames, 1)})
+        rows.append({"setting": name, "mm": split_means(errors[name]),
+                     "ms_per_frame": 1e3 * seconds[name] / max(frames, 1)})
     ref = rows[0]["mm"]["all"]
     columns = list(rows[0]["mm"])
     lines = [f"# Strain limit settings: bundle `{bundle.name}`, {frames} frames of `{Path(args.data).name}`", "",
@@ -97,13 +114,8 @@ def main(argv=None) -> int:
     for r in rows:
         lines.append(f"| {r['setting']} | " + " | ".join(f"{r['mm'][c]:.2f}" for c in columns)
                      + f" | {r['mm']['all'] / ref:.3f} | {r['ms_per_frame']:.1f} |")
-    text = "\n".join(lines) + "\n"
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "strain_limit.md").write_text(text)
-    (out / "strain_limit.json").write_text(json.dumps({"bundle": bundle.name, "frames": frames, "rows": rows},
-                                                      indent=1))
-    print(text)
+    write_report(args.out, "strain_limit", "\n".join(lines) + "\n", {"bundle": bundle.name, "frames": frames,
+                                                                      "rows": rows})
     return 0
 
 
