@@ -26,6 +26,7 @@ F factors.
 from __future__ import annotations
 
 import enum
+import functools
 from dataclasses import dataclass
 from typing import Callable
 
@@ -138,6 +139,18 @@ class GarmentPair:
     def num_vertices(self) -> int:
         """N."""
         return self.graph.num_vertices
+
+    @functools.cached_property
+    def rest_normals(self) -> np.ndarray:
+        """(N, 3) float64 the rest garment's unit vertex normals (:attr:`binding`'s rest points), made on first
+        use (what :func:`run_garment_model` smooths along)."""
+        return vertex_normals(self.binding.rest_points, self.faces)
+
+    @functools.cached_property
+    def neighbour_mean(self):
+        """:func:`~cloth_usd.core.mesh.neighbour_mean` of the garment's triangles, made on first use: a bake
+        evaluates a few frames a call, and making it costs more than smoothing them."""
+        return neighbour_mean(self.faces, self.num_vertices)
 
 
 @dataclass(frozen=True)
@@ -492,9 +505,6 @@ def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, tra
     """
     num_t, n = poses.shape[0], pair.num_vertices
     canonical = heading_frame(poses, transl, pair.joints[0]).canonical_poses(poses)
-    if smoothing:  # the rest garment's normals: only the displacement along them is smoothed
-        mean = neighbour_mean(pair.faces, n)
-        normals = vertex_normals(pair.binding.rest_points, pair.faces)
     points = np.empty((num_t, n, 3))
     moved = np.zeros(num_t, dtype=np.int64)
     for lo in range(0, num_t, batch_size):
@@ -504,7 +514,7 @@ def run_garment_model(body: BodyModel, pair: GarmentPair, poses: np.ndarray, tra
             raise ArgumentError(f"the garment model gave a displacement of shape {d.shape}, expected "
                                 f"({hi - lo}, {n}, 3)")
         if smoothing:
-            d = smooth_along_normals(d, normals, pair.faces, smoothing, mean=mean)
+            d = smooth_along_normals(d, pair.rest_normals, pair.faces, smoothing, mean=pair.neighbour_mean)
         m = skin_displaced(pair.binding, poses[lo:hi], transl[lo:hi], body.parents, d)
         if postprocess:
             posed = pose_body(body, pair, poses[lo:hi], transl[lo:hi])
